@@ -1,0 +1,60 @@
+"""bwdesign: certified hysteresis observers and tracking controllers for Bouc-Wen actuators.
+
+The public API is re-exported here name by name; everything else lives in
+modules whose contents may change.
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("bwdesign")
+except PackageNotFoundError:  # running from a source tree without installation
+    __version__ = "0.0.0+unknown"
+
+from .config import ControllerSettings, StageConfig, load_config, load_plant
+from .envelope import Envelope, derive_envelope, given_envelope
+from .errors import (
+    BWDesignError,
+    ConfigError,
+    GainError,
+    InputError,
+    ParameterError,
+    SolverError,
+    UnboundedModelError,
+)
+from .metrics import Metrics, steady_state_window, tracking_metrics
+from .params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
+from .plant import hysteresis_increment, simulate_zoh, zoh_step
+from .references import Sine, Step, Triangle
+
+__all__ = [
+    "__version__",
+    "BoucWenParams",
+    "PhysicalParams",
+    "BoundedClassVerdict",
+    "PRESETS",
+    "preset",
+    "load_plant",
+    "load_config",
+    "StageConfig",
+    "ControllerSettings",
+    "Envelope",
+    "derive_envelope",
+    "given_envelope",
+    "Sine",
+    "Triangle",
+    "Step",
+    "Metrics",
+    "tracking_metrics",
+    "steady_state_window",
+    "hysteresis_increment",
+    "zoh_step",
+    "simulate_zoh",
+    "BWDesignError",
+    "ConfigError",
+    "ParameterError",
+    "UnboundedModelError",
+    "GainError",
+    "InputError",
+    "SolverError",
+]

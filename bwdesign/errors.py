@@ -1,0 +1,60 @@
+"""Typed exceptions raised by bwdesign.
+
+Every exception subclasses a built-in (mostly :class:`ValueError`) so callers
+can catch either the specific class or the built-in. Messages name the object,
+what was expected and what was found.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "BWDesignError",
+    "ConfigError",
+    "ParameterError",
+    "UnboundedModelError",
+    "GainError",
+    "InputError",
+    "SolverError",
+]
+
+
+class BWDesignError(Exception):
+    """Base class of every error bwdesign raises on purpose."""
+
+
+class ParameterError(BWDesignError, ValueError):
+    """A model parameter is missing, non-numeric, non-finite or out of range.
+
+    Attributes
+    ----------
+    field : str or None
+        Name of the offending parameter, when there is one.
+    """
+
+    def __init__(self, message: str, *, field: str | None = None):
+        super().__init__(message)
+        self.field = field
+
+
+class ConfigError(BWDesignError, ValueError):
+    """A configuration file or preset name cannot be used as given."""
+
+
+class UnboundedModelError(BWDesignError, ValueError):
+    """The Bouc-Wen parameters are outside the bounded class.
+
+    Design and simulation functions refuse such a model unless they are called
+    with ``allow_unbounded=True``.
+    """
+
+
+class GainError(BWDesignError, ValueError):
+    """Observer or controller gains have the wrong shape, value or stability."""
+
+
+class InputError(BWDesignError, ValueError):
+    """A signal (input, measurement, time step) is malformed or non-finite."""
+
+
+class SolverError(BWDesignError, RuntimeError):
+    """A convex solver failed; the result is *not* a certificate."""

@@ -1,0 +1,216 @@
+"""Exactness of the sampled-data plant against an independent integration."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+
+from bwdesign import UnboundedModelError, hysteresis_increment, preset, simulate_zoh, zoh_step
+from bwdesign.errors import InputError
+from bwdesign.params import BoucWenParams
+from bwdesign.plant import discretize, rhs
+
+DT = 2e-4
+
+
+def reference_step(p, x, u_prev, u, dt):
+    """Independent reference: hysteresis integrated in u along the jump, then
+    the linear part integrated in time with x3 and u frozen (solve_ivp, DOP853)."""
+    x1, x2, h = x
+    if u != u_prev:
+        s = math.copysign(1.0, u - u_prev)
+        sol = solve_ivp(
+            lambda _v, y: [p.alpha - p.beta * s * y[0] - p.gamma * abs(y[0])],
+            (u_prev, u),
+            [h],
+            method="DOP853",
+            rtol=1e-12,
+            atol=1e-14,
+        )
+        h = sol.y[0, -1]
+    sol = solve_ivp(
+        lambda _t, y: [y[1], -p.a1 * y[0] - p.a2 * y[1] - p.a1 * h + p.a3 * u],
+        (0.0, dt),
+        [x1, x2],
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-12,
+    )
+    return np.array([sol.y[0, -1], sol.y[1, -1], h])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_exact_against_independent_integration(usable_plant, seed):
+    p = usable_plant
+    rng = np.random.default_rng(seed)
+    span = 6.0 if p.a1 > 1e6 else 120.0
+    # a random walk with frequent reversals, plus a few large jumps
+    u = np.cumsum(rng.normal(0.0, 0.05 * span, 150))
+    u[rng.integers(0, 150, 5)] += rng.normal(0, span, 5)
+    x0 = np.array([1.0, 0.0, 0.3])
+    X = simulate_zoh(p, u, DT, x0, u_prev=0.0)
+    ref = np.empty_like(X)
+    ref[0] = x0
+    up = 0.0
+    for k, uk in enumerate(u):
+        ref[k + 1] = reference_step(p, ref[k], up, uk, DT)
+        up = uk
+    scale = np.abs(ref).max(axis=0)
+    rel = np.abs(X - ref).max(axis=0) / scale
+    assert rel.max() < 1e-8, rel
+
+
+def test_row_convention(experiment):
+    u = np.array([10.0, 20.0, 20.0])
+    X = simulate_zoh(experiment, u, DT, np.zeros(3), u_prev=5.0)
+    assert X.shape == (4, 3)
+    np.testing.assert_array_equal(X[0], np.zeros(3))
+    np.testing.assert_allclose(X[1], zoh_step(experiment, np.zeros(3), 5.0, 10.0, DT), rtol=1e-15)
+    np.testing.assert_allclose(X[2], zoh_step(experiment, X[1], 10.0, 20.0, DT), rtol=1e-14)
+    # no jump at the last sample: x3 unchanged
+    assert X[3, 2] == X[2, 2]
+
+
+def test_static_equilibrium(experiment):
+    """Holding u for long reaches x1 = (a3/a1) u - x3."""
+    X = simulate_zoh(experiment, np.full(2000, 50.0), 1e-3, np.zeros(3))
+    assert X[-1, 0] == pytest.approx(experiment.static_gain * 50.0 - X[-1, 2], rel=1e-9)
+
+
+def test_exact_is_stable_where_forward_euler_diverges(simulation):
+    """Section 4 plant at 0.2 ms: its 2 kHz resonance makes forward Euler unstable."""
+    p = simulation
+    t = np.arange(0.0, 0.5, DT)
+    u = 3.0 * np.sin(0.4 * np.pi * t - 0.5 * np.pi) + 3.0
+    X = simulate_zoh(p, u, DT, np.array([10.0, 2.0, 2.0]))
+    assert np.all(np.isfinite(X))
+    assert np.abs(X[:, 0]).max() < 100.0  # um; the static range is about 0..60
+
+    x = np.array([10.0, 2.0, 2.0])
+    up = u[0]
+    peak = 0.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        for uk in u[:2000]:
+            x = x + DT * rhs(p, x, uk, (uk - up) / DT)
+            up = uk
+            peak = max(peak, abs(x[0]))
+    assert not (peak < 1e6), "forward Euler should diverge on this plant at 0.2 ms"
+    eig = np.linalg.eigvals(np.array([[0.0, 1.0], [-p.a1, -p.a2]]))
+    assert np.abs(1 + eig * DT).max() > 2.5  # |1 + lambda dt| ~ 2.6
+
+
+def test_discrete_poles_are_exp_of_continuous(usable_plant):
+    z = discretize(usable_plant, DT)
+    eig_c = np.linalg.eigvals(np.array([[0.0, 1.0], [-usable_plant.a1, -usable_plant.a2]]))
+    eig_d = np.linalg.eigvals(z.F[:2, :2])
+    np.testing.assert_allclose(
+        np.sort_complex(eig_d), np.sort_complex(np.exp(eig_c * DT)), rtol=1e-10
+    )
+
+
+def test_unbounded_model_is_refused_unless_allowed():
+    p = preset("paper_simulation")
+    t = np.arange(0.0, 5.0, DT)
+    u = 3.0 * np.sin(0.4 * np.pi * t - 0.5 * np.pi) + 3.0
+    with pytest.raises(UnboundedModelError):
+        simulate_zoh(p, u, DT, np.zeros(3))
+    X = simulate_zoh(p, u, DT, np.array([10.0, 2.0, 2.0]), allow_unbounded=True)
+    # as printed, x3 grows without bound on the rising input (DESIGN.md 2.4)
+    assert not np.all(np.abs(X[:, 2]) < 1e6)
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(u=np.zeros((2, 2))), "1-D"),
+        (dict(u=np.array([0.0, np.nan])), "finite"),
+        (dict(dt=0.0), "dt must be"),
+        (dict(dt=-1e-3), "dt must be"),
+        (dict(x0=np.zeros(2)), r"shape \(3,\)"),
+        (dict(x0=np.array([0.0, np.inf, 0.0])), "finite"),
+        (dict(u_prev=math.nan), "u_prev"),
+    ],
+    ids=["u-2d", "u-nan", "dt-zero", "dt-neg", "x0-shape", "x0-inf", "uprev-nan"],
+)
+def test_bad_inputs(experiment, kwargs, match):
+    args = dict(u=np.zeros(3), dt=DT, x0=np.zeros(3), u_prev=0.0)
+    args.update(kwargs)
+    with pytest.raises(InputError, match=match):
+        simulate_zoh(experiment, args["u"], args["dt"], args["x0"], u_prev=args["u_prev"])
+
+
+# -- hysteresis_increment properties ------------------------------------------
+
+bounded_params = st.builds(
+    lambda alpha, beta, frac: BoucWenParams(
+        a1=1e5, a2=100.0, a3=1e5, alpha=alpha, beta=beta, gamma=frac * beta
+    ),
+    alpha=st.floats(0.05, 10.0),
+    beta=st.floats(0.01, 3.0),
+    frac=st.floats(-0.95, 1.0),  # |gamma| <= beta, beta + gamma > 0
+)
+volts = st.floats(-200.0, 200.0, allow_nan=False)
+
+
+def _hmax(p):
+    return p.alpha / (p.beta + p.gamma)
+
+
+@settings(max_examples=300, deadline=None)
+@given(p=bounded_params, h0=st.floats(-5.0, 5.0), u=st.lists(volts, min_size=3, max_size=3))
+def test_composition_over_monotone_path(p, h0, u):
+    u0, u1, u2 = sorted(u)
+    for a, b, c in ((u0, u1, u2), (u2, u1, u0)):
+        two = hysteresis_increment(p, hysteresis_increment(p, h0, a, b), b, c)
+        one = hysteresis_increment(p, h0, a, c)
+        assert two == pytest.approx(one, rel=1e-9, abs=1e-11)
+
+
+@settings(max_examples=300, deadline=None)
+@given(p=bounded_params, h0=st.floats(-20.0, 20.0), u0=volts, u1=volts)
+def test_bounded_class_stays_bounded(p, h0, u0, u1):
+    h1 = hysteresis_increment(p, h0, u0, u1)
+    assert abs(h1) <= max(abs(h0), _hmax(p)) * (1 + 1e-12) + 1e-12
+
+
+@settings(max_examples=300, deadline=None)
+@given(p=bounded_params, frac=st.floats(-1.0, 1.0), u0=volts, u1=volts)
+def test_increment_has_the_sign_of_the_input_step(p, frac, u0, u1):
+    h0 = frac * _hmax(p)
+    h1 = hysteresis_increment(p, h0, u0, u1)
+    assert (h1 - h0) * (u1 - u0) >= -1e-12 * (1 + abs(u1 - u0))
+
+
+@settings(max_examples=300, deadline=None)
+@given(p=bounded_params, frac=st.floats(0.01, 0.99), u0=volts, du=st.floats(0.5, 100.0))
+def test_reversal_does_not_retrace(p, frac, u0, du):
+    """A reversal takes another path: with x3 > 0 the descent is steeper than the
+    ascent (dh/du differs by 2 beta x3), so up-then-back ends strictly below the
+    start; mirrored, down-then-back from x3 < 0 ends strictly above."""
+    h0 = frac * _hmax(p)
+    up = hysteresis_increment(p, h0, u0, u0 + du)
+    back = hysteresis_increment(p, up, u0 + du, u0)
+    assert back < h0 - 1e-9 * _hmax(p)
+    down = hysteresis_increment(p, -h0, u0, u0 - du)
+    again = hysteresis_increment(p, down, u0 - du, u0)
+    assert again > -h0 + 1e-9 * _hmax(p)
+
+
+def test_zero_crossing_inside_the_jump(experiment):
+    """From a negative state, a rising jump crosses zero and continues on the other branch."""
+    p = experiment
+    h0 = -0.5
+    # distance to the crossing on the beta - gamma branch
+    c = p.beta - p.gamma
+    wz = math.log1p(-c * h0 / p.alpha) / c
+    assert hysteresis_increment(p, h0, 0.0, wz) == pytest.approx(0.0, abs=1e-12)
+    h = hysteresis_increment(p, h0, 0.0, wz + 1.0)
+    expected = p.alpha / (p.beta + p.gamma) * (1 - math.exp(-(p.beta + p.gamma)))
+    assert h == pytest.approx(expected, rel=1e-12)
+
+
+def test_no_jump_returns_state(experiment):
+    assert hysteresis_increment(experiment, 0.37, 12.0, 12.0) == 0.37
