@@ -23,6 +23,7 @@ from .errors import (
     UnboundedModelError,
 )
 from .metrics import Metrics, steady_state_window, tracking_metrics
+from .observers import ExtendedStateObserver, HysteresisObserver
 from .params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
 from .plant import hysteresis_increment, simulate_zoh, zoh_step
 from .references import Sine, Step, Triangle
@@ -47,6 +48,8 @@ __all__ = [
     "Metrics",
     "tracking_metrics",
     "steady_state_window",
+    "HysteresisObserver",
+    "ExtendedStateObserver",
     "hysteresis_increment",
     "zoh_step",
     "simulate_zoh",
