@@ -27,6 +27,7 @@ from .observers import ExtendedStateObserver, HysteresisObserver
 from .params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
 from .plant import hysteresis_increment, simulate_zoh, zoh_step
 from .references import Sine, Step, Triangle
+from .ukf import UnscentedObserver
 
 __all__ = [
     "__version__",
@@ -50,6 +51,7 @@ __all__ = [
     "steady_state_window",
     "HysteresisObserver",
     "ExtendedStateObserver",
+    "UnscentedObserver",
     "hysteresis_increment",
     "zoh_step",
     "simulate_zoh",

@@ -13,7 +13,10 @@ Both come in two forms:
       x_post  = x_prior + K (z - x_prior[0])
 
 - **Continuous-time** right-hand sides (:func:`phso_rhs`, :func:`eso_rhs`) for
-  analysis and for the paper's continuous simulations.
+  analysis and for the paper's continuous simulations, and the same observers
+  as python-control ``NonlinearIOSystem`` objects (:func:`observer_iosystem`,
+  ``as_iosystem()``) for ``control.interconnect`` and
+  ``control.input_output_response``.
 
 Continuous gains ``l`` map to the discrete correction ``K`` by pole matching:
 the nominal discrete error matrix ``(I - K C) F`` gets the eigenvalues
@@ -50,6 +53,7 @@ __all__ = [
     "eso_step",
     "phso_rhs",
     "eso_rhs",
+    "observer_iosystem",
 ]
 
 C = np.array([1.0, 0.0, 0.0])
@@ -188,7 +192,29 @@ def eso_step(
 def phso_rhs(
     params: BoucWenParams, gains: Any, xhat: np.ndarray, u: float, udot: float, y: float
 ) -> np.ndarray:
-    """Continuous PHSO, paper eq. (3): the model copy plus injection on ``y - x1hat``."""
+    """Continuous PHSO, paper eq. (3): the model copy plus injection on ``y - x1hat``.
+
+    Parameters
+    ----------
+    params : BoucWenParams
+    gains : sequence of float, length 3
+        Continuous gains (l1 in 1/s, l2 in 1/s^2, l3 in 1/s); not validated here
+        (use :func:`check_gains`).
+    xhat : array_like, shape (3,)
+        Estimate (x1 displacement, x2 velocity, x3 hysteresis; length unit, length unit/s,
+        length unit).
+    u : float
+        Input (V).
+    udot : float
+        Input rate u' (V/s); the PHSO needs it for the hysteresis copy phi(u', x3hat).
+    y : float
+        Measured displacement (length unit).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        d xhat / dt.
+    """
     l1, l2, l3 = gains
     x1, x2, x3 = xhat
     r = y - x1
@@ -204,7 +230,11 @@ def phso_rhs(
 def eso_rhs(
     params: BoucWenParams, gains: Any, xhat: np.ndarray, u: float, udot: float, y: float
 ) -> np.ndarray:
-    """Continuous ESO, paper eq. (21): ``x3hat' = l3 (y - x1hat)`` (no hysteresis model)."""
+    """Continuous ESO, paper eq. (21): ``x3hat' = l3 (y - x1hat)`` (no hysteresis model).
+
+    Same arguments as :func:`phso_rhs`; ``udot`` is accepted for a common signature
+    and ignored.
+    """
     l1, l2, l3 = gains
     x1, x2, x3 = xhat
     r = y - x1
@@ -217,18 +247,147 @@ def eso_rhs(
     )
 
 
+_RHS = {"phso": phso_rhs, "eso": eso_rhs}
+
+
+def observer_iosystem(
+    params: BoucWenParams,
+    gains: Any,
+    *,
+    kind: str = "phso",
+    name: str | None = None,
+    allow_unbounded: bool = False,
+):
+    """The continuous observer as a python-control ``NonlinearIOSystem``.
+
+    Inputs ``u`` (V), ``udot`` (V/s) and ``y`` (measured displacement, length
+    unit); states and outputs ``xhat[0]``, ``xhat[1]``, ``xhat[2]`` (the
+    estimate). Signal names follow python-control's vector convention, so
+    ``control.interconnect`` connects ``y`` to a plant output named ``y`` and
+    ``u``/``udot`` to external inputs of the same names, and ``'xhat'`` selects
+    all three outputs.
+
+    Parameters
+    ----------
+    params : BoucWenParams
+    gains : array_like, shape (3,)
+        Continuous gains (l1 in 1/s, l2 in 1/s^2, l3 in 1/s), checked against the
+        Hurwitz conditions (4).
+    kind : {"phso", "eso"}
+        Hysteresis observer (eq. 3) or extended state observer (eq. 21).
+    name : str, optional
+        System name (default: ``kind``).
+    allow_unbounded : bool
+        Accept parameters outside the bounded class.
+
+    Returns
+    -------
+    control.NonlinearIOSystem
+
+    Raises
+    ------
+    GainError
+        Gains of the wrong length, non-finite, or violating conditions (4).
+    ValueError
+        Unknown ``kind``.
+
+    Examples
+    --------
+    >>> import numpy as np, control
+    >>> from bwdesign import preset
+    >>> from bwdesign.plant import rhs
+    >>> p = preset("paper_experiment")
+    >>> plant = control.nlsys(lambda t, x, u, _: rhs(p, x, u[0], u[1]),
+    ...                       lambda t, x, u, _: x[:1], inputs=["u", "udot"],
+    ...                       states=3, outputs=["y"], name="plant")
+    >>> obs = observer_iosystem(p, (8.0, 64.0, -512.0))
+    >>> loop = control.interconnect([plant, obs], inplist=["u", "udot"],
+    ...                             outlist=["y", "xhat"])
+    >>> t = np.linspace(0.0, 0.05, 51)
+    >>> resp = control.input_output_response(loop, t, [np.full_like(t, 10.0), 0 * t],
+    ...                                      initial_state=[1.0, 0, 0, 0, 0, 0])
+    >>> resp.outputs.shape
+    (4, 51)
+    """
+    import control  # heavy import, only needed here
+
+    if kind not in _RHS:
+        raise ValueError(f"kind must be 'phso' or 'eso', got {kind!r}")
+    require_bounded(params, allow_unbounded)
+    g = tuple(check_gains(params, gains).tolist())
+    f = _RHS[kind]
+
+    def updfcn(t, x, u, _params):
+        return f(params, g, x, u[0], u[1], u[2])
+
+    def outfcn(t, x, u, _params):
+        return x
+
+    xhat = ["xhat[0]", "xhat[1]", "xhat[2]"]
+    return control.nlsys(
+        updfcn,
+        outfcn,
+        inputs=["u", "udot", "y"],
+        states=list(xhat),
+        outputs=list(xhat),
+        name=name or kind,
+    )
+
+
 def _finite_scalar(v: Any, name: str) -> float:
-    try:
+    """``v`` as a finite float; a size-1 array (filterpy's ``z`` of shape (1,)) is accepted."""
+    if isinstance(v, float | int) and not isinstance(v, bool):
         f = float(v)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number, got {v!r}") from None
+    else:
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"{name} must be a number, got {v!r}") from None
+        if a.size != 1:
+            raise InputError(f"{name} must be a single number, got shape {a.shape}")
+        f = float(a.reshape(()))
     if not math.isfinite(f):
         raise InputError(f"{name} must be finite, got {f}")
     return f
 
 
+def _measurements(zs: Any, n: int) -> list[float | None]:
+    """Validate a record of measurements (``None`` = missing) as python floats."""
+    if isinstance(zs, np.ndarray) and zs.dtype.kind in "fiu":
+        z = zs.reshape(-1) if zs.ndim == 2 and zs.shape[1:] == (1,) else zs
+        if z.ndim != 1 or z.size != n:
+            raise InputError(
+                f"zs must be 1-D (or (N, 1)) with one measurement per input, got shape "
+                f"{zs.shape} for {n} inputs"
+            )
+        if not np.all(np.isfinite(z)):
+            k = int(np.flatnonzero(~np.isfinite(z))[0])
+            raise InputError(
+                f"z must be finite, got zs[{k}] = {z[k]} (use None for a missing sample)"
+            )
+        return z.astype(float).tolist()
+    if len(zs) != n:
+        raise InputError(f"zs and us must have the same length, got {len(zs)} and {n}")
+    return [None if z is None else _finite_scalar(z, "z") for z in zs]
+
+
+def _inputs(us: Any) -> list[float]:
+    u = np.asarray(us, dtype=float)
+    if u.ndim != 1:
+        raise InputError(f"us must be a 1-D sequence of held inputs (V), got shape {u.shape}")
+    if not np.all(np.isfinite(u)):
+        k = int(np.flatnonzero(~np.isfinite(u))[0])
+        raise InputError(f"u must be finite, got us[{k}] = {u[k]}")
+    return u.tolist()
+
+
 class _SampledObserver:
     """Shared machinery of the discrete observers (filterpy-style interface).
+
+    The step is computed on python floats with the scalar entries of the ZOH
+    matrices (one sample costs a few microseconds); :func:`phso_step` and
+    :func:`eso_step` are independent array twins of it, checked against it in
+    the tests.
 
     Attributes
     ----------
@@ -248,7 +407,7 @@ class _SampledObserver:
         Input held over the previous sample (V).
     """
 
-    _step = staticmethod(phso_step)
+    _hysteresis = True
     kind = ""
 
     def __init__(
@@ -266,6 +425,9 @@ class _SampledObserver:
         self.params = params
         self.dt = _check_dt(dt)
         self._zoh = discretize(params, self.dt)
+        F, g = self._zoh.F, self._zoh.g
+        # the two non-trivial rows of F and g (row 3 is x3+ = h, g3 = 0)
+        self._coef = (*F[0].tolist(), *F[1].tolist(), float(g[0]), float(g[1]))
         if (gains is None) == (discrete is None):
             raise GainError(
                 f"{type(self).__name__}: give either continuous gains (l1, l2, l3) or "
@@ -286,7 +448,7 @@ class _SampledObserver:
         self.reset(x0, u_prev=u_prev)
 
     def reset(self, x0: Any = None, *, u_prev: float = 0.0) -> None:
-        """Restart from ``x0`` (default zeros) with ``u_prev`` held before the first sample."""
+        """Restart from ``x0`` (default zeros) with ``u_prev`` (V) held before the first sample."""
         x = np.zeros(3) if x0 is None else np.array(x0, dtype=float)
         if x.shape != (3,) or not np.all(np.isfinite(x)):
             raise InputError(f"x0 must be a finite vector of shape (3,), got {x0!r}")
@@ -298,33 +460,58 @@ class _SampledObserver:
         self.z: float | None = None
 
     def predict(self, u: float) -> None:
-        """Carry the estimate from ``t_k`` to ``t_{k+1}`` with ``u`` (V) held."""
+        """Carry the estimate from ``t_k`` to ``t_{k+1}`` with ``u`` (V) held.
+
+        For the PHSO the hysteresis copy first follows the jump ``u_prev -> u``
+        in closed form; then the linear part is propagated exactly (ZOH).
+        """
         u = _finite_scalar(u, "u")
-        prior, _ = self._step(self.params, self._zoh, self.K, self.x, self.u_prev, u, None)
-        self.x = prior
-        self.x_prior = prior.copy()
+        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        if self._hysteresis:
+            x3 = hysteresis_increment(self.params, x3, self.u_prev, u)
+        f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
+        prior = (
+            f11 * x1 + f12 * x2 + f13 * x3 + g1 * u,
+            f21 * x1 + f22 * x2 + f23 * x3 + g2 * u,
+            x3,
+        )
+        self.x = np.array(prior)
+        self.x_prior = np.array(prior)
         self.u_prev = u
 
     def update(self, z: float | None) -> None:
-        """Correct with the measured displacement ``z = y(t_{k+1})``; ``None`` skips."""
+        """Correct with the measured displacement ``z = y(t_{k+1})``; ``None`` skips.
+
+        Parameters
+        ----------
+        z : float, array of size 1, or None
+            Measured displacement (length unit).
+        """
         if z is None:
             self.z = None
             self.y = 0.0
-            self.x_post = self.x.copy()
+            self.x_post = np.array(self.x, dtype=float)
             return
         z = _finite_scalar(z, "z")
+        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        k1, k2, k3 = self.K.tolist()
+        r = z - x1
+        post = (x1 + k1 * r, x2 + k2 * r, x3 + k3 * r)
         self.z = z
-        self.y = z - self.x[0]
-        self.x = self.x + self.K * self.y
-        self.x_post = self.x.copy()
+        self.y = r
+        self.x = np.array(post)
+        self.x_post = np.array(post)
 
     def batch_filter(self, zs: Any, us: Any) -> np.ndarray:
         """Run ``predict(us[k])``, ``update(zs[k])`` over a record.
 
+        Gives the same numbers as the loop (the same float operations in the
+        same order) without its per-call overhead.
+
         Parameters
         ----------
         zs : sequence of float or None, length N
-            ``zs[k] = y(t_{k+1})``; ``None`` marks a missing sample.
+            ``zs[k] = y(t_{k+1})`` (length unit); ``None`` marks a missing sample.
         us : array_like, shape (N,)
             Held inputs (V).
 
@@ -333,27 +520,56 @@ class _SampledObserver:
         ndarray, shape (N, 3)
             The posterior estimates at ``t_1 .. t_N``.
         """
-        us = np.asarray(us, dtype=float)
-        if us.ndim != 1 or len(zs) != us.size:
-            raise InputError(
-                f"zs and us must be 1-D of the same length, got {len(zs)} and {us.shape}"
+        ul = _inputs(us)
+        zl = _measurements(zs, len(ul))
+        if not ul:
+            return np.empty((0, 3))
+        f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
+        k1, k2, k3 = self.K.tolist()
+        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        up = self.u_prev
+        params, hyst = self.params, self._hysteresis
+        out = []
+        append = out.append
+        for uk, zk in zip(ul, zl, strict=True):
+            if hyst:
+                x3 = hysteresis_increment(params, x3, up, uk)
+            x1, x2 = (
+                f11 * x1 + f12 * x2 + f13 * x3 + g1 * uk,
+                f21 * x1 + f22 * x2 + f23 * x3 + g2 * uk,
             )
-        if not np.all(np.isfinite(us)):
-            raise InputError("us must be finite")
-        zf = [None if z is None else _finite_scalar(z, "z") for z in zs]
-        out = np.empty((us.size, 3))
-        x, up = self.x, self.u_prev
-        step, p, zoh, K = self._step, self.params, self._zoh, self.K
-        prior = self.x_prior
-        for k, (uk, zk) in enumerate(zip(us.tolist(), zf, strict=True)):
-            prior, x = step(p, zoh, K, x, up, uk, zk)
-            out[k] = x
+            prior = (x1, x2, x3)
+            if zk is not None:
+                r = zk - x1
+                x1, x2, x3 = x1 + k1 * r, x2 + k2 * r, x3 + k3 * r
+            append((x1, x2, x3))
             up = uk
-        if us.size:
-            self.x, self.x_prior, self.x_post, self.u_prev = x.copy(), prior.copy(), x.copy(), up
-            self.z = zf[-1]
-            self.y = 0.0 if zf[-1] is None else zf[-1] - prior[0]
-        return out
+        res = np.array(out)
+        self.x_prior = np.array(prior)
+        self.y = 0.0 if zl[-1] is None else zl[-1] - prior[0]
+        self.x, self.x_post, self.u_prev, self.z = res[-1].copy(), res[-1].copy(), up, zl[-1]
+        return res
+
+    def as_iosystem(self, name: str | None = None):
+        """The continuous form of this observer as a python-control ``NonlinearIOSystem``.
+
+        See :func:`observer_iosystem` (inputs ``u``, ``udot``, ``y``; states and
+        outputs ``xhat[0..2]``).
+
+        Raises
+        ------
+        GainError
+            The observer was built from discrete gains ``K``, which do not
+            define a continuous observer.
+        """
+        if self.gains is None:
+            raise GainError(
+                f"{type(self).__name__} was built from discrete gains K; the continuous "
+                "form needs continuous gains (l1, l2, l3): build it with gains=..."
+            )
+        return observer_iosystem(
+            self.params, self.gains, kind=self.kind, name=name, allow_unbounded=True
+        )
 
     def __repr__(self) -> str:
         g = (
@@ -363,7 +579,7 @@ class _SampledObserver:
         )
         return (
             f"{type(self).__name__}(plant={self.params.name or 'unnamed'!r}, {g}, "
-            f"dt={self.dt:g}, x={np.array2string(self.x, precision=6)})"
+            f"dt={self.dt:g}, x={np.array2string(np.asarray(self.x), precision=6)})"
         )
 
 
@@ -396,7 +612,7 @@ class HysteresisObserver(_SampledObserver):
     (3,)
     """
 
-    _step = staticmethod(phso_step)
+    _hysteresis = True
     kind = "phso"
 
 
@@ -407,5 +623,5 @@ class ExtendedStateObserver(_SampledObserver):
     holds x3hat instead of following the hysteresis model.
     """
 
-    _step = staticmethod(eso_step)
+    _hysteresis = False
     kind = "eso"
