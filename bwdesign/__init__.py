@@ -11,6 +11,15 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
+from .certify import (
+    CertificateReport,
+    Margin,
+    SynthesisResult,
+    TierCertificate,
+    certify,
+    certify_discrete,
+    synthesize,
+)
 from .config import ControllerSettings, StageConfig, load_config, load_plant
 from .envelope import Envelope, derive_envelope, given_envelope
 from .errors import (
@@ -22,6 +31,7 @@ from .errors import (
     SolverError,
     UnboundedModelError,
 )
+from .linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .metrics import Metrics, steady_state_window, tracking_metrics
 from .observers import ExtendedStateObserver, HysteresisObserver
 from .params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
@@ -62,4 +72,15 @@ __all__ = [
     "GainError",
     "InputError",
     "SolverError",
+    "certify",
+    "certify_discrete",
+    "synthesize",
+    "CertificateReport",
+    "TierCertificate",
+    "Margin",
+    "SynthesisResult",
+    "error_dynamics",
+    "hysteresis_bode",
+    "ErrorDynamics",
+    "HysteresisBode",
 ]

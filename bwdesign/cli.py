@@ -182,8 +182,31 @@ def _params_args(p: argparse.ArgumentParser) -> None:
     add_plant_args(p)
 
 
+def _lazy(module: str, name: str) -> Callable[..., Any]:
+    """A command hook imported on first use (keeps ``bwdesign --help`` light)."""
+
+    def call(*args: Any) -> Any:
+        from importlib import import_module
+
+        return getattr(import_module(f"bwdesign.{module}"), name)(*args)
+
+    return call
+
+
 COMMANDS: list[Command] = [
     ("params", "print a plant's parameters and bounded-class verdict", _params_args, _cmd_params),
+    (
+        "certify",
+        "check observer gains against an input-rate envelope (four certificate tiers)",
+        _lazy("_cli_certify", "certify_args"),
+        _lazy("_cli_certify", "run_certify"),
+    ),
+    (
+        "synthesize",
+        "find observer gains certified for an input-rate envelope (LMI synthesis)",
+        _lazy("_cli_certify", "synthesize_args"),
+        _lazy("_cli_certify", "run_synthesize"),
+    ),
 ]
 
 
