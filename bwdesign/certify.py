@@ -57,7 +57,7 @@ import numpy as np
 from scipy.linalg import logm, matrix_balance, solve_continuous_lyapunov
 
 from .errors import GainError, InputError
-from .observers import discrete_gains
+from .observers import _as_gains, check_gains, discrete_gains, error_matrix
 from .params import BoucWenParams, require_bounded
 from .plant import _check_dt, discretize
 
@@ -71,8 +71,6 @@ __all__ = [
     "certify_discrete",
     "synthesize",
     "continuous_equivalent",
-    "check_hurwitz",
-    "error_matrix",
     "sector_interval",
     "rho_interval",
     "default_pole_radius",
@@ -391,18 +389,6 @@ def _frozen(a: np.ndarray) -> np.ndarray:
 # -- model pieces ---------------------------------------------------------------
 
 
-def _as_gains(gains: Sequence[float], what: str = "observer gains") -> tuple[float, float, float]:
-    try:
-        arr = np.asarray(gains, dtype=float)
-    except (TypeError, ValueError):
-        raise GainError(f"{what} must be three numbers (l1, l2, l3), got {gains!r}") from None
-    if arr.shape != (3,):
-        raise GainError(f"{what} must be three numbers (l1, l2, l3), got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise GainError(f"{what} must be finite, got {arr.tolist()}")
-    return (float(arr[0]), float(arr[1]), float(arr[2]))
-
-
 def _rate(value: float, name: str, *, positive: bool) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
         raise InputError(f"{name} must be a number, got {value!r}")
@@ -412,56 +398,6 @@ def _rate(value: float, name: str, *, positive: bool) -> float:
             f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value}"
         )
     return value
-
-
-def check_hurwitz(params: BoucWenParams, gains: Sequence[float]) -> tuple[float, float, float]:
-    """Check the paper's conditions (4) that make ``A = A0 - l C`` Hurwitz.
-
-    ``l1 + a2 > 0``, ``(l1 + a2)(l1 a2 + a1 + l2) + l3 a1 > 0`` and
-    ``l3 a1 < 0`` (the Routh-Hurwitz conditions of
-    ``s^3 + (l1 + a2) s^2 + (l1 a2 + a1 + l2) s - a1 l3``).
-
-    Parameters
-    ----------
-    params : BoucWenParams
-    gains : sequence of 3 floats
-        ``(l1, l2, l3)`` in 1/s, 1/s^2, 1/s.
-
-    Returns
-    -------
-    tuple of 3 floats
-        The validated gains.
-
-    Raises
-    ------
-    GainError
-        Wrong shape, non-finite, or a condition fails (named in the message).
-    """
-    l1, l2, l3 = _as_gains(gains)
-    a1, a2 = params.a1, params.a2
-    c1 = l1 + a2
-    c2 = (l1 + a2) * (l1 * a2 + a1 + l2) + l3 * a1
-    c3 = l3 * a1
-    failed = []
-    if not c1 > 0:
-        failed.append(f"l1 + a2 = {c1:.6g} must be > 0")
-    if not c2 > 0:
-        failed.append(f"(l1 + a2)(l1 a2 + a1 + l2) + l3 a1 = {c2:.6g} must be > 0")
-    if not c3 < 0:
-        failed.append(f"l3 a1 = {c3:.6g} must be < 0 (l3 must be negative)")
-    if failed:
-        label = params.name or "the plant"
-        raise GainError(
-            f"observer gains l = ({l1:g}, {l2:g}, {l3:g}) on {label}: the error dynamics "
-            f"A = A0 - l C are not Hurwitz (paper conditions 4): {'; '.join(failed)}"
-        )
-    return l1, l2, l3
-
-
-def error_matrix(params: BoucWenParams, gains: Sequence[float]) -> np.ndarray:
-    """``A = A0 - l C = [[-l1, 1, 0], [-(a1 + l2), -a2, -a1], [-l3, 0, 0]]`` (1/s)."""
-    l1, l2, l3 = _as_gains(gains)
-    return np.array([[-l1, 1.0, 0.0], [-(params.a1 + l2), -params.a2, -params.a1], [-l3, 0.0, 0.0]])
 
 
 def _model_matrix(params: BoucWenParams) -> np.ndarray:
@@ -1114,7 +1050,7 @@ def certify(
     decay = _rate(decay, "decay (1/s)", positive=False)
     if dt is not None:
         dt = _check_dt(dt)
-    gains = check_hurwitz(params, gains)
+    gains = tuple(check_gains(params, gains).tolist())
     sc = _scale_continuous(params, error_matrix(params, gains))
     if tiers is None:
         wanted = TIERS if dt is not None else TIERS[:3]

@@ -33,8 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from .certify import _scale_continuous, check_hurwitz, error_matrix, sector_interval
+from .certify import _scale_continuous, sector_interval
 from .errors import InputError
+from .observers import check_gains, error_matrix
 from .params import BoucWenParams
 
 __all__ = [
@@ -85,7 +86,7 @@ def error_system(
     """
     import control
 
-    gains = check_hurwitz(params, gains)
+    gains = tuple(check_gains(params, gains).tolist())
     A = error_matrix(params, gains)
     A[2, 2] -= float(k)
     A += float(decay) * np.eye(3)
@@ -171,7 +172,7 @@ def error_dynamics(
     True
     """
     udot_max = _nonneg(udot_max, "udot_max (V/s)")
-    gains = check_hurwitz(params, gains)
+    gains = tuple(check_gains(params, gains).tolist())
     k_int = sector_interval(params, udot_max)
     sc = _scale_continuous(params, error_matrix(params, gains))
     systems, poles, wns, zetas = [], [], [], []
@@ -209,7 +210,7 @@ def hinf_norm(
     import control
 
     decay = _nonneg(decay, "decay (1/s)")
-    gains = check_hurwitz(params, gains)
+    gains = tuple(check_gains(params, gains).tolist())
     sys_hat, w = _scaled_system(params, gains, k=0.0, decay=decay)
     if float(np.max(np.linalg.eigvals(sys_hat.A).real)) >= 0:
         return math.inf, 0.0
@@ -291,7 +292,7 @@ def hysteresis_bode(
     """
     import control
 
-    gains = check_hurwitz(params, gains)
+    gains = tuple(check_gains(params, gains).tolist())
     sys_hat, w = _scaled_system(params, gains, k=0.0, decay=0.0)
     peak_h, omega_h = control.linfnorm(sys_hat)
     peak, omega_peak = float(peak_h) / w, float(omega_h) * w

@@ -88,16 +88,22 @@ def check_gains(params: BoucWenParams, gains: Any) -> np.ndarray:
     """
     l1, l2, l3 = g = _as_gains(gains)
     a1, a2 = params.a1, params.a2
-    if not l1 + a2 > 0:
-        raise GainError(f"gains {g.tolist()} violate l1 + a2 > 0 (l1 + a2 = {l1 + a2:.6g})")
     c2 = (l1 + a2) * (l1 * a2 + a1 + l2) + l3 * a1
+    failed = []
+    if not l1 + a2 > 0:
+        failed.append(f"l1 + a2 > 0 (it is {l1 + a2:.6g})")
     if not c2 > 0:
-        raise GainError(
-            f"gains {g.tolist()} violate (l1 + a2)(l1 a2 + a1 + l2) + l3 a1 > 0 "
-            f"(it is {c2:.6g}); raise l1 or l2, or reduce |l3|"
+        failed.append(
+            f"(l1 + a2)(l1 a2 + a1 + l2) + l3 a1 > 0 (it is {c2:.6g}; raise l1 or l2, "
+            "or reduce |l3|)"
         )
     if not l3 * a1 < 0:
-        raise GainError(f"gains {g.tolist()} violate l3 a1 < 0: l3 must be negative")
+        failed.append("l3 a1 < 0 (l3 must be negative)")
+    if failed:
+        raise GainError(
+            f"observer gains l = ({l1:g}, {l2:g}, {l3:g}) on {params.name or 'the plant'}: "
+            f"A = A0 - l C is not Hurwitz; they violate {'; '.join(failed)}"
+        )
     return g
 
 
@@ -312,7 +318,7 @@ def observer_iosystem(
     import control  # heavy import, only needed here
 
     if kind not in _RHS:
-        raise ValueError(f"kind must be 'phso' or 'eso', got {kind!r}")
+        raise InputError(f"kind must be 'phso' or 'eso', got {kind!r}")
     require_bounded(params, allow_unbounded)
     g = tuple(check_gains(params, gains).tolist())
     f = _RHS[kind]
