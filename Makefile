@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report lint
+.PHONY: install test report lint bench
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -25,3 +25,7 @@ report: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check bwdesign tests analysis
 	$(BIN)/ruff format --check bwdesign tests analysis
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/bench_observers.py
+	$(BIN)/python benchmarks/bench_certify.py
