@@ -1410,6 +1410,16 @@ class _NoSolve:
     attempts = ("rho interval unbounded at this rate",)
 
 
+#: Synthesised gains are rounded to this many significant digits before re-certification.
+SIGNIFICANT_DIGITS = 7
+
+
+def _round_sig(values: tuple[float, ...] | None) -> tuple[float, ...] | None:
+    if values is None:
+        return None
+    return tuple(float(f"{v:.{SIGNIFICANT_DIGITS}g}") for v in values)
+
+
 def _finish(
     params: BoucWenParams,
     first: _Attempt,
@@ -1422,6 +1432,11 @@ def _finish(
     dt: float | None,
     allow_unbounded: bool,
 ) -> SynthesisResult:
+    # Round to SIGNIFICANT_DIGITS before re-certifying: the certificate is then
+    # about exactly the numbers reported (and pasted into firmware), and the
+    # solver's last-digit noise does not reach the report.
+    gains = _round_sig(gains)
+    K = _round_sig(K)
     report: CertificateReport | None = None
     problem = ""
     if gains is not None:

@@ -170,7 +170,9 @@ def solve(problem: cp.Problem, variables: Mapping[str, cp.Variable]) -> LMISolut
         try:
             with warnings.catch_warnings(), _quiet_c_output(solver in _NOISY):
                 warnings.simplefilter("ignore")
-                problem.solve(solver=solver, **_OPTIONS[solver])
+                # warm_start=False: a reused (cached) program must give the same
+                # answer as a fresh one, so reports are reproducible bit for bit.
+                problem.solve(solver=solver, warm_start=False, **_OPTIONS[solver])
         except cp.error.SolverError as err:
             attempts.append(f"{solver}: solver error: {' '.join(str(err).split())[:200]}")
             last_status, last_solver = "solver_error", solver
