@@ -32,11 +32,14 @@ from .errors import (
     UnboundedModelError,
 )
 from .linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
+from .loop import DigitalTuning, LoopAnalysis, analyze_loop, digital_tuning, mismatch_sweep
 from .metrics import Metrics, steady_state_window, tracking_metrics
 from .observers import ExtendedStateObserver, HysteresisObserver
 from .params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
 from .plant import hysteresis_increment, simulate_zoh, zoh_step
 from .references import Sine, Step, Triangle
+from .simulate import SimulationResult, simulate, simulate_continuous
+from .tracking import DiscreteTrackingController, TrackingController, TuningWarning
 from .ukf import UnscentedObserver
 
 __all__ = [
@@ -65,6 +68,17 @@ __all__ = [
     "hysteresis_increment",
     "zoh_step",
     "simulate_zoh",
+    "TrackingController",
+    "DiscreteTrackingController",
+    "TuningWarning",
+    "simulate",
+    "simulate_continuous",
+    "SimulationResult",
+    "analyze_loop",
+    "mismatch_sweep",
+    "digital_tuning",
+    "LoopAnalysis",
+    "DigitalTuning",
     "BWDesignError",
     "ConfigError",
     "ParameterError",

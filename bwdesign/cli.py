@@ -207,6 +207,12 @@ COMMANDS: list[Command] = [
         _lazy("_cli_certify", "synthesize_args"),
         _lazy("_cli_certify", "run_synthesize"),
     ),
+    (
+        "simulate",
+        "simulate the sampled tracking loop (observer + eq. 12) and report its error",
+        _lazy("_cli_simulate", "simulate_args"),
+        _lazy("_cli_simulate", "run_simulate"),
+    ),
 ]
 
 

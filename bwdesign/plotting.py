@@ -337,8 +337,10 @@ def plot_peaking(
         for label, r in runs.items():
             lu = r.length_unit
             t = np.asarray(r.t)
-            s = np.ones_like(t, dtype=bool) if t_range is None else (
-                (t >= t_range[0]) & (t <= t_range[1])
+            s = (
+                np.ones_like(t, dtype=bool)
+                if t_range is None
+                else ((t >= t_range[0]) & (t <= t_range[1]))
             )
             c = _track_color(label)
             if first:
@@ -383,13 +385,21 @@ def plot_loop_poles(analyses: dict[str, Any], *, title: str = ""):
         ax.plot(np.cos(th), np.sin(th), color="0.6", lw=0.8)
         for i, (label, a) in enumerate(analyses.items()):
             z = np.asarray(a.poles)
-            ax.plot(z.real, z.imag, ls="", marker=markers[i % len(markers)], ms=7,
-                    mfc="none", label=label)
+            ax.plot(
+                z.real,
+                z.imag,
+                ls="",
+                marker=markers[i % len(markers)],
+                ms=7,
+                mfc="none",
+                label=label,
+            )
         ax.set_aspect("equal")
         ax.grid(True, alpha=0.3)
         ax.set_xlabel("Re z")
     axes[0, 0].set_ylabel("Im z")
     axes[0, 0].set_title("closed-loop poles", fontsize=10)
+    axes[0, 1].set_aspect("auto")
     axes[0, 1].set_xlim(0.9, 1.01)
     axes[0, 1].set_ylim(-0.1, 0.1)
     axes[0, 1].set_title("zoom near z = 1", fontsize=10)
@@ -430,4 +440,76 @@ def plot_mismatch_sweep(sweeps: dict[str, Any], *, title: str = ""):
     axes[0, 0].legend(loc="best", fontsize=7)
     if title:
         fig.suptitle(title)
+    return fig, axes
+
+
+# -- certificates and linear analysis (bwdesign.report) -----------------------------
+
+__all__ += ["plot_error_poles", "plot_hysteresis_bode"]
+
+
+def plot_error_poles(poles: dict[str, np.ndarray], *, title: str = ""):
+    """Observer error poles in the s-plane.
+
+    Parameters
+    ----------
+    poles : dict of str to complex ndarray
+        Label -> eigenvalues (1/s).
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    axes : ndarray of Axes, shape (1, 1)
+    """
+    fig, axes = _figure(1, 1, figsize=(7.0, 5.0))
+    ax = axes[0, 0]
+    markers = ("x", "o", "+", "s", "^", "d")
+    for i, (label, p) in enumerate(poles.items()):
+        p = np.asarray(p)
+        ax.plot(p.real, p.imag, ls="", marker=markers[i % len(markers)], ms=8, mfc="none",
+                label=label)
+    ax.set_xscale("symlog", linthresh=1.0)
+    ax.axvline(0.0, color="0.5", lw=0.8)
+    ax.set_xlabel("Re s (1/s, symlog)")
+    ax.set_ylabel("Im s (rad/s)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    if title:
+        ax.set_title(title)
+    return fig, axes
+
+
+def plot_hysteresis_bode(
+    bodes: dict[str, Any], *, lipschitz_coeff: float, udot_max: float, title: str = ""
+):
+    """Bode magnitude from the hysteresis error to eps3, with the lipschitz bound 1/L.
+
+    Parameters
+    ----------
+    bodes : dict of str to bwdesign.linear.HysteresisBode
+    lipschitz_coeff : float
+        ``|beta| + |gamma|`` (1/V).
+    udot_max : float
+        Envelope (V/s); the line ``1/L`` with ``L = lipschitz_coeff * udot_max``
+        is what the peak must stay below for the lipschitz tier.
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+    axes : ndarray of Axes, shape (1, 1)
+    """
+    fig, axes = _figure(1, 1, figsize=(8.0, 4.5))
+    ax = axes[0, 0]
+    for label, b in bodes.items():
+        ax.loglog(b.omega, b.magnitude, lw=1.2, label=f"{label} (peak {b.peak:.3g} s)")
+        ax.plot([b.omega_peak], [b.peak], marker="o", ms=5, color=ax.lines[-1].get_color())
+    bound = 1.0 / (lipschitz_coeff * udot_max)
+    ax.axhline(bound, color="tab:red", ls="--", lw=1.0,
+               label=f"1/L at |u'| = {udot_max:.4g} V/s")
+    ax.set_xlabel("omega (rad/s)")
+    ax.set_ylabel("|e3' (j omega I - A)^-1 e3| (s)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    if title:
+        ax.set_title(title)
     return fig, axes
