@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report lint bench
+.PHONY: install test report reports paper lint bench
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -19,8 +19,20 @@ install: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
+# the main job: the certified-gains report for the default stage
 report: $(STAMP)
-	$(BIN)/bwdesign params --plant $(CONFIG)
+	$(BIN)/bwdesign report --config $(CONFIG) --out $(OUT)
+
+# reports for every bundled stage configuration
+reports: $(STAMP)
+	for c in configs/*.toml; do \
+	  $(BIN)/bwdesign report --config $$c --out reports/$$(basename $$c .toml) || exit $$?; \
+	done
+
+# the paper reproduction: observer comparison (Section 4.1) and Tables 1-2
+paper: $(STAMP)
+	$(BIN)/python analysis/observer_comparison.py --out reports/observers
+	$(BIN)/python analysis/paper_tables.py --out reports/paper
 
 lint: $(STAMP)
 	$(BIN)/ruff check bwdesign tests analysis

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any, NoReturn
@@ -193,6 +194,28 @@ def _lazy(module: str, name: str) -> Callable[..., Any]:
     return call
 
 
+def _report_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", required=True, metavar="FILE.toml", help="stage configuration")
+    p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument(
+        "--allow-unbounded",
+        action="store_true",
+        help="accept parameters outside the bounded Bouc-Wen class",
+    )
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from .config import load_config
+    from .report import write_report
+
+    outcome = write_report(
+        load_config(args.config), args.out, quiet=args.quiet, allow_unbounded=args.allow_unbounded
+    )
+    print(f"{outcome.out_dir}/report.md: {outcome.verdict}")
+    return EXIT_OK if outcome.certified else EXIT_NO
+
+
 COMMANDS: list[Command] = [
     ("params", "print a plant's parameters and bounded-class verdict", _params_args, _cmd_params),
     (
@@ -212,6 +235,12 @@ COMMANDS: list[Command] = [
         "simulate the sampled tracking loop (observer + eq. 12) and report its error",
         _lazy("_cli_simulate", "simulate_args"),
         _lazy("_cli_simulate", "run_simulate"),
+    ),
+    (
+        "report",
+        "write the certified-gains report (Markdown, HTML, JSON, figures) for a stage config",
+        _report_args,
+        _cmd_report,
     ),
 ]
 
@@ -236,6 +265,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BWDesignError as err:
         print("error: " + " ".join(str(err).split()), file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        # the reader went away (e.g. `bwdesign ... --json | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_NO
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -9,6 +9,7 @@ One file per stage; only ``[plant]`` is required::
     [sampling]     dt (s)
     [envelope]     udot_max (V/s), or from_reference = true with optional margin >= 1
     [reference]    kind = "sine" | "triangle" | "step", amplitude, offset, frequency, ...
+    [synthesis]    decay (1/s) and pole_radius (rad/s) asked of the gain synthesis in reports
 
 Unknown sections and keys are errors that name the allowed ones.
 """
@@ -36,6 +37,7 @@ _SECTIONS = {
     "sampling": {"dt"},
     "envelope": {"udot_max", "from_reference", "margin"},
     "reference": None,  # checked per kind
+    "synthesis": {"decay", "pole_radius"},
 }
 
 
@@ -72,6 +74,8 @@ class StageConfig:
     reference : Reference or None
     envelope_spec : dict or None
         The ``[envelope]`` table as given; see :meth:`envelope`.
+    synthesis : dict or None
+        ``decay`` (1/s) and ``pole_radius`` (rad/s) for the report's gain synthesis.
     source : str
         Path of the file.
     sha256 : str
@@ -84,6 +88,7 @@ class StageConfig:
     dt: float | None = None
     reference: Reference | None = None
     envelope_spec: dict[str, Any] | None = None
+    synthesis: dict[str, float] | None = None
     source: str = ""
     sha256: str = ""
 
@@ -197,6 +202,13 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
                 "[envelope]: give udot_max (V/s, a positive number) or from_reference = true"
             )
 
+    synthesis = None
+    if "synthesis" in data:
+        syn = _check_keys(data["synthesis"], "synthesis", _SECTIONS["synthesis"])
+        synthesis = {k: _num(syn[k], f"[synthesis] {k}", positive=k == "pole_radius") for k in syn}
+        if synthesis.get("decay", 0.0) < 0:
+            raise ConfigError(f"[synthesis] decay must be >= 0 (1/s), got {synthesis['decay']:g}")
+
     return StageConfig(
         plant=plant,
         gains=gains,
@@ -204,6 +216,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         dt=dt,
         reference=reference,
         envelope_spec=env,
+        synthesis=synthesis,
         source=source,
         sha256=sha256,
     )

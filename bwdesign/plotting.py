@@ -466,8 +466,9 @@ def plot_error_poles(poles: dict[str, np.ndarray], *, title: str = ""):
     markers = ("x", "o", "+", "s", "^", "d")
     for i, (label, p) in enumerate(poles.items()):
         p = np.asarray(p)
-        ax.plot(p.real, p.imag, ls="", marker=markers[i % len(markers)], ms=8, mfc="none",
-                label=label)
+        ax.plot(
+            p.real, p.imag, ls="", marker=markers[i % len(markers)], ms=8, mfc="none", label=label
+        )
     ax.set_xscale("symlog", linthresh=1.0)
     ax.axvline(0.0, color="0.5", lw=0.8)
     ax.set_xlabel("Re s (1/s, symlog)")
@@ -504,8 +505,7 @@ def plot_hysteresis_bode(
         ax.loglog(b.omega, b.magnitude, lw=1.2, label=f"{label} (peak {b.peak:.3g} s)")
         ax.plot([b.omega_peak], [b.peak], marker="o", ms=5, color=ax.lines[-1].get_color())
     bound = 1.0 / (lipschitz_coeff * udot_max)
-    ax.axhline(bound, color="tab:red", ls="--", lw=1.0,
-               label=f"1/L at |u'| = {udot_max:.4g} V/s")
+    ax.axhline(bound, color="tab:red", ls="--", lw=1.0, label=f"1/L at |u'| = {udot_max:.4g} V/s")
     ax.set_xlabel("omega (rad/s)")
     ax.set_ylabel("|e3' (j omega I - A)^-1 e3| (s)")
     ax.grid(True, which="both", alpha=0.3)

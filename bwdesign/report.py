@@ -1,0 +1,669 @@
+"""The certified-gains report: one stage configuration in, a report to hand on out.
+
+:func:`write_report` turns a :class:`~bwdesign.config.StageConfig` into a
+directory holding ``report.md``, a self-contained ``report.html``,
+``certificate.json`` and ``figures/*.png``. Everything is computed here from
+the configuration; nothing is edited by hand. The directory is built under a
+temporary name beside the target and moved into place at the end, so an error
+never leaves a half-written report.
+
+The numbers in ``certificate.json`` come from :func:`certificate_document`,
+which the determinism test re-runs and compares with the committed file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import platform
+import shutil
+import sys
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .certify import CertificateReport, SynthesisResult, certify, synthesize
+from .cli import dump_json, plant_summary
+from .config import StageConfig
+from .document import Document
+from .envelope import Envelope
+from .errors import ConfigError
+from .linear import error_dynamics, hysteresis_bode
+from .loop import analyze_loop, digital_tuning
+from .observers import discrete_gains
+from .params import require_bounded
+from .simulate import simulate
+
+__all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DECAY"]
+
+#: Decay rate (1/s) requested from synthesis when the config has no [synthesis] decay.
+DEFAULT_DECAY = 100.0
+
+TIER_MEANING = {
+    "theorem1": (
+        "The paper's Theorem 1 with the sign corrected (2L||P|| < 1, P from the Lyapunov "
+        "equation, L = (|beta| + |gamma|) |u'|max). Sound but very conservative: the plant "
+        "couples eps3 into eps2 through a1, which makes ||P|| huge."
+    ),
+    "lipschitz": (
+        "Bounded-real (S-procedure) LMI using only |phi~| <= L |eps3|; equivalent to "
+        "||e3'(sI - A)^-1 e3||_inf < 1/L. Ignores the sign of the hysteresis error."
+    ),
+    "sector": (
+        "Common quadratic Lyapunov function at both ends of the sector "
+        "k in [min(0, (beta - |gamma|) v), max(0, (beta + |gamma|) v)]: uses the fact that "
+        "the hysteresis error is dissipative when beta >= |gamma|. Certifies the continuous "
+        "observer."
+    ),
+    "sampled": (
+        "The same question for the observer that actually runs at dt (exact ZOH model, "
+        "hysteresis jump map with slope rho in a certified interval): the certificate for "
+        "the code on the stage."
+    ),
+}
+
+
+@dataclass(frozen=True)
+class ReportOutcome:
+    """What :func:`write_report` produced.
+
+    Attributes
+    ----------
+    out_dir : Path
+    certified : bool
+        The configured gains (if any) are certified and synthesis is feasible.
+    verdict : str
+        The sentence at the top of the report.
+    """
+
+    out_dir: Path
+    certified: bool
+    verdict: str
+
+
+def _require(config: StageConfig) -> tuple[float, Envelope]:
+    missing = []
+    if config.dt is None:
+        missing.append("[sampling] (dt)")
+    if config.envelope_spec is None:
+        missing.append("[envelope] (udot_max or from_reference)")
+    if config.reference is None:
+        missing.append("[reference] (the trajectory simulated at the envelope)")
+    if config.controller is None:
+        missing.append("[controller] (lambda1, lambda2)")
+    if missing:
+        raise ConfigError(
+            f"{config.source or 'config'}: the report needs section(s) {', '.join(missing)}"
+        )
+    env = config.envelope()
+    return float(config.dt), env
+
+
+def _synthesis_request(config: StageConfig) -> dict[str, Any]:
+    spec = config.synthesis or {}
+    return {"decay": spec.get("decay", DEFAULT_DECAY), "pole_radius": spec.get("pole_radius")}
+
+
+def certificate_document(
+    config: StageConfig, *, allow_unbounded: bool = False
+) -> tuple[dict[str, Any], CertificateReport | None, SynthesisResult]:
+    """The content of ``certificate.json`` and the objects behind it.
+
+    Returns
+    -------
+    doc : dict
+        ``configured`` and ``synthesized`` (each a ``bwdesign certify --json``
+        document), ``synthesis`` (the request and its outcome), ``envelope``,
+        ``firmware`` (discrete gains at dt, full precision) and ``config``.
+    configured : CertificateReport or None
+    synthesized : SynthesisResult
+    """
+    params = config.plant
+    require_bounded(params, allow_unbounded)
+    dt, env = _require(config)
+    v = env.udot_max
+    configured = None
+    if config.gains is not None:
+        configured = certify(params, config.gains, udot_max=v, dt=dt)
+    req = _synthesis_request(config)
+    synth = synthesize(
+        params, udot_max=v, decay=req["decay"], pole_radius=req["pole_radius"], dt=dt
+    )
+    firmware: dict[str, Any] = {
+        "dt": dt,
+        "form": "x_post = x_prior + K (z - x_prior[0]); see bwdesign.observers",
+    }
+    if configured is not None:
+        firmware["configured_K"] = [float(k) for k in configured.discrete_gains]
+    if synth.discrete_gains is not None:
+        firmware["synthesized_K"] = [float(k) for k in synth.discrete_gains]
+    sdoc = synth.to_dict()
+    doc = {
+        "config": {"source": Path(config.source).name, "sha256": config.sha256},
+        "envelope": env.to_dict(),
+        "configured": None if configured is None else configured.to_dict(),
+        "synthesized": None if synth.report is None else synth.report.to_dict(),
+        "synthesis": {
+            k: sdoc[k]
+            for k in (
+                "feasible",
+                "tier",
+                "gains",
+                "discrete_gains",
+                "decay",
+                "pole_radius",
+                "binding",
+                "reason",
+                "max_decay",
+                "max_udot",
+                "solver",
+                "status",
+            )
+        },
+        "firmware": firmware,
+    }
+    return doc, configured, synth
+
+
+def _fmt(x: Any, digits: int = 4) -> str:
+    if x is None:
+        return "-"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, float | int | np.floating):
+        x = float(x)
+        if math.isinf(x):
+            return "unbounded" if x > 0 else "-inf"
+        if math.isnan(x):
+            return "-"
+        return f"{x:.{digits}g}"
+    return str(x)
+
+
+def _gains_text(g: Any) -> str:
+    return "(" + ", ".join(f"{float(v):.6g}" for v in g) + ")" if g is not None else "-"
+
+
+def _versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in (
+        "bwdesign",
+        "numpy",
+        "scipy",
+        "cvxpy",
+        "clarabel",
+        "scs",
+        "control",
+        "filterpy",
+        "matplotlib",
+    ):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def _tier_cell(rep: CertificateReport | None, name: str) -> list[str]:
+    if rep is None:
+        return ["-", "-", "-", "-"]
+    try:
+        c = rep.tier(name)
+    except KeyError:
+        return ["-", "-", "-", "-"]
+    worst = min((m.limit - m.value for m in c.margins), default=None) if c.holds else None
+    env = _fmt(c.max_udot) + (" (search limit)" if c.max_udot_capped else "")
+    return [
+        "**yes**" if c.holds else "no",
+        env,
+        _fmt(c.decay_rate),
+        _fmt(worst, 3) if worst is not None else "-",
+    ]
+
+
+def _verdict(
+    config: StageConfig, configured: CertificateReport | None, synth: SynthesisResult, v: float
+) -> tuple[bool, str]:
+    parts = []
+    ok = True
+    if configured is not None:
+        if configured.certified:
+            parts.append(
+                f"CERTIFIED: the configured gains {_gains_text(config.gains)} hold at "
+                f"|u'| <= {v:.4g} V/s (strongest tier: {configured.best})."
+            )
+        else:
+            ok = False
+            parts.append(
+                f"NOT CERTIFIED: no tier certifies the configured gains "
+                f"{_gains_text(config.gains)} at |u'| <= {v:.4g} V/s."
+            )
+    if synth.feasible:
+        parts.append(f"Synthesised gains certified at the same envelope: {synth.reason}.")
+    else:
+        ok = False
+        parts.append(f"SYNTHESIS INFEASIBLE: {synth.reason}.")
+    return ok, " ".join(parts)
+
+
+def _progress(quiet: bool) -> Callable[[str], None]:
+    def say(msg: str) -> None:
+        if not quiet:
+            print(f"[report] {msg}", file=sys.stderr, flush=True)
+
+    return say
+
+
+def build_report(
+    config: StageConfig,
+    out: Path,
+    *,
+    allow_unbounded: bool = False,
+    quiet: bool = False,
+    date: str | None = None,
+) -> tuple[Document, dict[str, Any], bool, str]:
+    """Compute everything and write figures into ``out / "figures"``.
+
+    Returns the document, the certificate JSON document, the verdict flag and sentence.
+    """
+    from . import plotting
+
+    say = _progress(quiet)
+    params = config.plant
+    lu = params.length_unit
+    figs = out / "figures"
+    figs.mkdir(parents=True, exist_ok=True)
+
+    say("certifying the configured gains and synthesising a certified set")
+    cert_doc, configured, synth = certificate_document(config, allow_unbounded=allow_unbounded)
+    dt, env = _require(config)
+    v = env.udot_max
+    ok, verdict = _verdict(config, configured, synth, v)
+
+    doc = Document(f"Certified-gains report: {params.name or Path(config.source).stem}")
+    doc.callout(verdict)
+    doc.para(
+        f"Generated by `bwdesign report` from `{Path(config.source).name}`; do not edit. "
+        "Every number below is computed from that file."
+    )
+
+    # -- plant ---------------------------------------------------------------
+    summ = plant_summary(params)
+    doc.heading("Plant")
+    units = {
+        "a1": "1/s^2",
+        "a2": "1/s",
+        "a3": f"{lu}/(V s^2)",
+        "alpha": f"{lu}/V",
+        "beta": "1/V",
+        "gamma": "1/V",
+    }
+    rows = [[k, f"{getattr(params, k):.8g}", u] for k, u in units.items()]
+    if params.physical is not None:
+        for k in ("m", "b", "k", "d", "alpha0"):
+            rows.append([k, f"{getattr(params.physical, k):.8g}", "physical"])
+    d = summ["derived"]
+    rows += [
+        ["natural frequency sqrt(a1)/(2 pi)", f"{d['natural_frequency_hz']:.6g}", "Hz"],
+        ["damping ratio a2/(2 sqrt(a1))", f"{d['damping_ratio']:.4g}", "-"],
+        ["static gain a3/a1", f"{d['static_gain']:.6g}", d["static_gain_unit"]],
+    ]
+    doc.table(["quantity", "value", "unit"], rows)
+    bc = summ["bounded_class"]
+    doc.para(f"Bounded class: **{'yes' if bc['bounded'] else 'no'}**. {bc['reason']}.")
+    if "note" in summ:
+        doc.para(summ["note"])
+
+    # -- envelope ------------------------------------------------------------
+    doc.heading("Operating envelope")
+    erows = [
+        ["|u'| bound used by the certificates", f"{v:.6g} V/s"],
+        ["sample time dt", f"{dt * 1e3:.6g} ms"],
+        ["source", env.source],
+    ]
+    if env.derived is not None:
+        erows += [
+            ["reference", config.reference.describe()],
+            ["exact-inverse max |u'|", f"{env.derived:.6g} V/s"],
+            ["leading order (a1/a3) max |x_d'|", f"{env.leading_order:.6g} V/s"],
+            ["margin", f"{env.margin:g}"],
+            ["feedforward input range", f"{env.u_range[0]:.4g} .. {env.u_range[1]:.4g} V"],
+        ]
+    doc.table(["item", "value"], erows)
+    doc.para(
+        f"How: {env.method}. Per sample the certificates bound the input jump by "
+        f"|u'| dt = {v * dt:.4g} V."
+    )
+
+    # -- certificates ----------------------------------------------------------
+    doc.heading("Certificates")
+    req = _synthesis_request(config)
+    doc.para(
+        f"Configured gains l = {_gains_text(config.gains)}; synthesised gains "
+        f"l = {_gains_text(synth.gains)} (discrete K = {_gains_text(synth.discrete_gains)}), "
+        f"from an LMI synthesis for the {synth.tier} tier asking decay >= {req['decay']:g} 1/s"
+        f" within pole radius {synth.pole_radius:.5g} rad/s. Envelope = the largest |u'| "
+        "(V/s) the tier certifies for those gains; decay = certified exponential rate "
+        "(1/s) at the envelope above; check = the smallest slack of the eigenvalue checks "
+        "made outside the solver (scaled, > 0 passes)."
+    )
+    header = [
+        "tier",
+        "configured: holds",
+        "envelope",
+        "decay",
+        "check",
+        "synthesised: holds",
+        "envelope",
+        "decay",
+        "check",
+    ]
+    crow = []
+    for name in ("theorem1", "lipschitz", "sector", "sampled"):
+        crow.append([name] + _tier_cell(configured, name) + _tier_cell(synth.report, name))
+    doc.table(header, crow, id="certificates")
+    doc.bullets([f"`{k}`: {t}" for k, t in TIER_MEANING.items()])
+    if configured is not None:
+        t1 = configured.tier("theorem1")
+        doc.para(f"Theorem 1 for the configured gains: {t1.status}.")
+
+    # -- linear analysis -----------------------------------------------------
+    say("linear analysis of the observer error dynamics")
+    doc.heading("Observer error dynamics")
+    sets = {}
+    if config.gains is not None:
+        sets["configured"] = config.gains
+    if synth.gains is not None:
+        sets["synthesised"] = synth.gains
+    prow = []
+    poles_by_label = {}
+    bodes = {}
+    for label, g in sets.items():
+        ed = error_dynamics(params, g, udot_max=v)
+        for k, p, z in zip(ed.k_interval, ed.poles, ed.damping, strict=True):
+            prow.append(
+                [
+                    label,
+                    f"{k:.4g}",
+                    ", ".join(_pole_text(x) for x in p),
+                    ", ".join(f"{x:.3f}" for x in z),
+                ]
+            )
+            poles_by_label[f"{label}, k = {k:.3g}"] = p
+        bodes[label] = hysteresis_bode(params, g)
+    doc.table(["gains", "k (1/s)", "poles of A - k e3 e3' (1/s)", "damping"], prow)
+    fig, _ = plotting.plot_error_poles(poles_by_label, title="observer error poles")
+    plotting.save_figure(fig, figs / "error_poles.png")
+    doc.figure("figures/error_poles.png", "Observer error poles at both ends of the sector")
+    fig, _ = plotting.plot_hysteresis_bode(
+        bodes, lipschitz_coeff=abs(params.beta) + abs(params.gamma), udot_max=v
+    )
+    plotting.save_figure(fig, figs / "hysteresis_bode.png")
+    doc.figure(
+        "figures/hysteresis_bode.png",
+        "Bode magnitude from the hysteresis error to eps3; its peak sets the lipschitz "
+        "envelope 1/((|beta| + |gamma|) peak)",
+    )
+    doc.para(
+        "; ".join(
+            f"{k}: H-infinity peak {b.peak:.4g} s at {b.omega_peak:.4g} rad/s, "
+            f"lipschitz envelope {b.lipschitz_envelope:.4g} V/s"
+            for k, b in bodes.items()
+        )
+        + "."
+    )
+
+    # -- tracking loop -------------------------------------------------------
+    say("tracking-loop analysis (continuous, sampled, digital tuning)")
+    ctl = config.controller
+    doc.heading("Tracking loop")
+    g_loop = config.gains if config.gains is not None else synth.gains
+    cont = analyze_loop(params, ctl.lambda1, ctl.lambda2, g_loop)
+    samp = analyze_loop(params, ctl.lambda1, ctl.lambda2, g_loop, dt=dt)
+    tuning = digital_tuning(params, dt)
+    lrow = []
+    for label, a in (
+        ("eq. 12, continuous", cont),
+        ("eq. 12, sampled at dt", samp),
+        ("digital tuning (discrete form), sampled", tuning.nominal),
+    ):
+        lrow.append(
+            [
+                label,
+                _fmt(a.stable),
+                _fmt(a.max_real_part),
+                _fmt(a.spectral_radius, 8) if a.spectral_radius is not None else "-",
+                _fmt(a.gain_margin_db, 3),
+                _fmt(a.phase_margin, 3),
+                _fmt(a.delay_margin * 1e3, 3),
+            ]
+        )
+    doc.para(
+        f"Configured constants lambda1 = {ctl.lambda1:g}, lambda2 = {ctl.lambda2:g} "
+        f"with observer gains {_gains_text(g_loop)}; the digital tuning chooses "
+        f"lambda1 = {tuning.lambda1:.4g}, lambda2 = {tuning.lambda2:.4g}, integral rate "
+        f"{_fmt(tuning.integral_rate)} 1/s and observer gains "
+        f"{_gains_text(tuning.gains)} for dt = {dt * 1e3:g} ms."
+    )
+    doc.table(
+        [
+            "loop",
+            "stable",
+            "max Re(s) (1/s)",
+            "spectral radius",
+            "gain margin (dB)",
+            "phase margin (deg)",
+            "delay margin (ms)",
+        ],
+        lrow,
+    )
+    doc.para(
+        f"Digital tuning, worst case over a {tuning.mismatch} mismatch: gain margin "
+        f"{tuning.worst_gain_margin_db:.3g} dB, phase margin "
+        f"{tuning.worst_phase_margin:.3g} deg, delay margin "
+        f"{tuning.worst_delay_margin * 1e3:.3g} ms; requirements met: "
+        f"{'yes' if tuning.met else 'no'}. {tuning.reasoning}"
+    )
+    fig, _ = plotting.plot_loop_poles(
+        {"eq. 12 sampled": samp, "digital tuning": tuning.nominal},
+        title="tracking loop poles (z-plane)",
+    )
+    plotting.save_figure(fig, figs / "loop_poles.png")
+    doc.figure("figures/loop_poles.png", "Closed-loop poles of the sampled tracking loops")
+
+    # -- simulation ----------------------------------------------------------
+    say("simulating the tracking loop at the envelope (PHSO and ESO)")
+    doc.heading("Simulated tracking at the envelope")
+    ref = config.reference
+    duration = 3.0 * ref.period if ref.period is not None else 1.0
+    xd0, vd0, ad0 = (float(np.asarray(a)) for a in ref.evaluate(0.0))
+    start = dict(
+        x0=[xd0, vd0, 0.0],
+        xhat0=[xd0, vd0, 0.0],
+        u_prev=(ad0 + params.a2 * vd0 + params.a1 * xd0) / params.a3,
+    )
+    runs = {}
+    srow = []
+    for label, kw in (
+        (
+            "PHSO (eq. 12)",
+            dict(observer="phso", gains=g_loop, lambda1=ctl.lambda1, lambda2=ctl.lambda2),
+        ),
+        (
+            "ESO (eq. 12)",
+            dict(observer="eso", gains=g_loop, lambda1=ctl.lambda1, lambda2=ctl.lambda2),
+        ),
+        (
+            "PHSO (digital tuning)",
+            dict(
+                observer="phso",
+                gains=tuning.gains,
+                lambda1=tuning.lambda1,
+                lambda2=tuning.lambda2,
+                form="discrete",
+                integral_rate=tuning.integral_rate,
+            ),
+        ),
+        (
+            "ESO (digital tuning)",
+            dict(
+                observer="eso",
+                gains=tuning.gains,
+                lambda1=tuning.lambda1,
+                lambda2=tuning.lambda2,
+                form="discrete",
+                integral_rate=tuning.integral_rate,
+            ),
+        ),
+    ):
+        r = simulate(params, ref, dt=dt, duration=duration, u_limits=_limits(ctl), **start, **kw)
+        runs[label] = r
+        if r.metrics is None:
+            srow.append([label, "unstable", "-", "-", "-", "-", "-"])
+            continue
+        er = r.estimation_rmse
+        srow.append(
+            [
+                label,
+                _fmt(r.metrics.maxe),
+                _fmt(r.metrics.me),
+                _fmt(r.metrics.rmse),
+                _fmt(er[0], 3),
+                _fmt(er[1], 3),
+                _fmt(er[2], 3),
+            ]
+        )
+    w = next(iter(runs.values())).window
+    doc.para(
+        f"Reference {ref.describe()}, dt = {dt * 1e3:g} ms, {duration:g} s from rest, "
+        f"nominal plant, no noise. Metrics over the last two periods "
+        f"({w[0]:g} .. {w[1]:g} s), in {lu}; estimation RMSE per state."
+    )
+    doc.table(
+        ["loop", f"MAXE ({lu})", f"ME ({lu})", f"RMSE ({lu})", "RMSE x1", "RMSE x2", "RMSE x3"],
+        srow,
+        id="tracking",
+    )
+    fig, _ = plotting.plot_tracking_comparison(runs, title="tracking at the envelope")
+    plotting.save_figure(fig, figs / "tracking.png")
+    doc.figure("figures/tracking.png", "Tracking, error and input over the metrics window")
+    curves = {}
+    for label, r in runs.items():
+        if r.stable:
+            err = np.asarray(r.xhat) - np.asarray(r.x)
+            for i in range(3):
+                curves[f"x{i + 1} | {label}"] = (np.asarray(r.t), err[:, i])
+    fig, _ = plotting.plot_estimation_errors(
+        curves, title="estimation errors in the loop", ylabel=f"|x_hat - x| ({lu}, {lu}/s)"
+    )
+    plotting.save_figure(fig, figs / "estimation_errors.png")
+    doc.figure("figures/estimation_errors.png", "Estimation error of each state in the loop")
+
+    # -- firmware ------------------------------------------------------------
+    doc.heading("Gains for firmware")
+    fw = cert_doc["firmware"]
+    lines = [f"# discrete observer gains at dt = {dt!r} s: x_post = x_prior + K*(z - x_prior[0])"]
+    if "configured_K" in fw:
+        lines.append(f"K_configured  = {fw['configured_K']!r}")
+    if "synthesized_K" in fw:
+        lines.append(f"K_synthesised = {fw['synthesized_K']!r}")
+    if config.gains is not None:
+        K = discrete_gains(params, config.gains, dt)
+        lines.append(f"# check: pole matching of l = {list(config.gains)!r} gives {K.tolist()!r}")
+    doc.pre("\n".join(lines))
+
+    # -- reproducibility -----------------------------------------------------
+    doc.heading("Reproducibility")
+    ver = _versions()
+    doc.table(
+        ["item", "value"],
+        [[k, v_] for k, v_ in ver.items()]
+        + [
+            ["solvers", "Clarabel (fallback SCS); only OPTIMAL is accepted"],
+            ["config", Path(config.source).name],
+            ["config sha256", config.sha256],
+            ["command", f"bwdesign report --config {Path(config.source).name}"],
+        ],
+    )
+    doc.para(f"Date: {date or datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}")
+    return doc, cert_doc, ok, verdict
+
+
+def _pole_text(p: complex) -> str:
+    if abs(p.imag) < 1e-9 * max(1.0, abs(p)):
+        return f"{p.real:.4g}"
+    return f"{p.real:.4g}{p.imag:+.4g}j"
+
+
+def _limits(ctl: Any) -> tuple[float, float] | None:
+    if ctl.u_min is None and ctl.u_max is None:
+        return None
+    return (
+        -math.inf if ctl.u_min is None else ctl.u_min,
+        math.inf if ctl.u_max is None else ctl.u_max,
+    )
+
+
+def write_report(
+    config: StageConfig,
+    out_dir: str | Path,
+    *,
+    allow_unbounded: bool = False,
+    quiet: bool = False,
+    date: str | None = None,
+) -> ReportOutcome:
+    """Write the report for ``config`` into ``out_dir`` (replacing it atomically).
+
+    Parameters
+    ----------
+    config : StageConfig
+        Needs [plant], [sampling], [envelope], [reference] and [controller];
+        [observer] gains are optional (without them only synthesised gains).
+    out_dir : path
+    allow_unbounded : bool
+    quiet : bool
+        No progress lines on stderr.
+    date : str, optional
+        Date line (default: now, UTC).
+
+    Returns
+    -------
+    ReportOutcome
+
+    Raises
+    ------
+    ConfigError
+        A section the report needs is missing.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    out_dir = Path(out_dir)
+    parent = out_dir.resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
+    try:
+        doc, cert_doc, ok, verdict = build_report(
+            config, tmp, allow_unbounded=allow_unbounded, quiet=quiet, date=date
+        )
+        (tmp / "certificate.json").write_text(dump_json(cert_doc) + "\n")
+        (tmp / "report.md").write_text(doc.to_markdown())
+        (tmp / "report.html").write_text(doc.to_html(tmp))
+        os.chmod(tmp, 0o755)
+        old = None
+        if out_dir.exists():
+            old = parent / f".{out_dir.name}.old-{os.getpid()}"
+            out_dir.rename(old)
+        tmp.rename(out_dir)
+        if old is not None:
+            shutil.rmtree(old)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return ReportOutcome(out_dir=out_dir, certified=ok, verdict=verdict)
