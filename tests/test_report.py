@@ -1,12 +1,11 @@
 """The certified-gains report: content, determinism, atomic writing, bad configs."""
 
 import json
-import math
 from pathlib import Path
 
 import pytest
 
-from bwdesign.cli import main
+from bwdesign.cli import dump_json, main
 from bwdesign.config import load_config
 from bwdesign.report import certificate_document, write_report
 
@@ -79,19 +78,8 @@ def test_committed_certificate_json_is_current():
     """Regenerate certificate.json and compare with the committed one (tolerances above)."""
     committed = json.loads((COMMITTED / "certificate.json").read_text())
     doc, _, _ = certificate_document(load_config(CONFIG))
-    fresh = json.loads(json.dumps(doc, default=float, allow_nan=True))
-    fresh = json.loads(json.dumps(_json_safe(fresh)))
+    fresh = json.loads(dump_json(doc))
     _compare(fresh, committed)
-
-
-def _json_safe(obj):
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    return obj
 
 
 def test_not_certified_is_a_well_formed_no(tmp_path, capsys):
