@@ -35,8 +35,8 @@ paper: $(STAMP)
 	$(BIN)/python analysis/paper_tables.py --out reports/paper
 
 lint: $(STAMP)
-	$(BIN)/ruff check bwdesign tests analysis
-	$(BIN)/ruff format --check bwdesign tests analysis
+	$(BIN)/ruff check bwdesign tests analysis benchmarks
+	$(BIN)/ruff format --check bwdesign tests analysis benchmarks
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
