@@ -244,8 +244,11 @@ def _verdict(
                 f"NOT CERTIFIED: no tier certifies the configured gains "
                 f"{_gains_text(config.gains)} at |u'| <= {v:.4g} V/s."
             )
+    if configured is None:
+        parts.append("No observer gains configured ([observer] gains); synthesis only.")
     if synth.feasible:
-        parts.append(f"Synthesised gains certified at the same envelope: {synth.reason}.")
+        where = "at the same envelope" if configured is not None else f"at |u'| <= {v:.4g} V/s"
+        parts.append(f"Synthesised gains certified {where}: {synth.reason}.")
     else:
         ok = False
         parts.append(f"SYNTHESIS INFEASIBLE: {synth.reason}.")
