@@ -23,6 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
+from itertools import product
 from pathlib import Path
 from typing import Any
 
@@ -491,40 +492,21 @@ def build_report(
         xhat0=[xd0, vd0, 0.0],
         u_prev=(ad0 + params.a2 * vd0 + params.a1 * xd0) / params.a3,
     )
+    laws = {
+        "eq. 12": dict(gains=g_loop, lambda1=ctl.lambda1, lambda2=ctl.lambda2),
+        "digital tuning": dict(
+            gains=tuning.gains,
+            lambda1=tuning.lambda1,
+            lambda2=tuning.lambda2,
+            form="discrete",
+            integral_rate=tuning.integral_rate,
+        ),
+    }
     runs = {}
     srow = []
-    for label, kw in (
-        (
-            "PHSO (eq. 12)",
-            dict(observer="phso", gains=g_loop, lambda1=ctl.lambda1, lambda2=ctl.lambda2),
-        ),
-        (
-            "ESO (eq. 12)",
-            dict(observer="eso", gains=g_loop, lambda1=ctl.lambda1, lambda2=ctl.lambda2),
-        ),
-        (
-            "PHSO (digital tuning)",
-            dict(
-                observer="phso",
-                gains=tuning.gains,
-                lambda1=tuning.lambda1,
-                lambda2=tuning.lambda2,
-                form="discrete",
-                integral_rate=tuning.integral_rate,
-            ),
-        ),
-        (
-            "ESO (digital tuning)",
-            dict(
-                observer="eso",
-                gains=tuning.gains,
-                lambda1=tuning.lambda1,
-                lambda2=tuning.lambda2,
-                form="discrete",
-                integral_rate=tuning.integral_rate,
-            ),
-        ),
-    ):
+    for (law, kw), observer in product(laws.items(), ("phso", "eso")):
+        label = f"{observer.upper()} ({law})"
+        kw = dict(kw, observer=observer)
         r = simulate(params, ref, dt=dt, duration=duration, u_limits=_limits(ctl), **start, **kw)
         runs[label] = r
         if r.metrics is None:
