@@ -13,7 +13,7 @@ Cases
   (40, 40, -80) and (80, 160, -640).
 - ``experiment``: ``paper_experiment`` with the paper's gains (8, 64, -512),
   driven open loop by the exact-inverse input of the Section 5 reference
-  ``80 sin(2 pi t) + 100`` um (``bwdesign.envelope.feedforward_input``), from
+  ``80 sin(2 pi t) + 100`` um (``bwdesign.model.envelope.feedforward_input``), from
   the state on the reference (x_d(0), x_d'(0), 0); estimates start at 0; 3 s.
 
 Each case is sampled at dt = 0.2 ms and 20 us, under two models of the true
@@ -62,8 +62,8 @@ from bwdesign import (
     simulate_zoh,
     tracking_metrics,
 )
-from bwdesign.envelope import feedforward_input
-from bwdesign.plotting import plot_estimation_errors, plot_observer_states, save_figure
+from bwdesign.model.envelope import feedforward_input
+from bwdesign.plotting.figures import plot_estimation_errors, plot_observer_states, save_figure
 
 NOISE_STD = 0.01  # um, on the displacement measurement
 SEED = 20240307

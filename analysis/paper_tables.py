@@ -8,7 +8,7 @@ Sections of the generated report (``paper_tables.md``, ``paper_tables.json``,
 PNG figures in ``--out``):
 
 1. **Table 1** (paper Section 4.2): continuous-time loop
-   (:func:`bwdesign.simulate.simulate_continuous`, Radau) on
+   (:func:`bwdesign.sim.simulate_continuous`, Radau) on
    ``paper_simulation_corrected`` with gains (80, 160, -640),
    lambda1 = 2.2e6, lambda2 = 80; references ``30 sin(2 pi f t - pi/2) + 30``
    at 1 and 20 Hz, and a triangle of the same amplitude, offset and phase at
@@ -17,7 +17,7 @@ PNG figures in ``--out``):
 2. **Digital loop** (paper Section 5 constants on ``paper_experiment`` at
    0.2 ms): poles, margins, a1-mismatch sensitivity, the predicted and the
    simulated steady-state error; and the digital tuning from
-   :func:`bwdesign.loop.digital_tuning`.
+   :func:`bwdesign.control.digital_tuning`.
 3. **Table 2** (Section 5): sampled loop at dt = 0.2 ms, sine
    ``80 sin(2 pi t) + 100`` and 1 Hz triangle 180 um peak to peak, offset
    100, with the paper's constants (eq. 12 as printed) and with the digital
@@ -45,8 +45,11 @@ import numpy as np
 
 import bwdesign
 from bwdesign import Sine, Step, Triangle, preset
-from bwdesign.loop import analyze_loop, digital_tuning, mismatch_sweep, observer_gains
-from bwdesign.simulate import SimulationResult, simulate, simulate_continuous
+from bwdesign.control.analysis import analyze_loop, mismatch_sweep
+from bwdesign.control.tuning import digital_tuning, observer_gains
+from bwdesign.sim.closed_loop import simulate
+from bwdesign.sim.continuous import simulate_continuous
+from bwdesign.sim.result import SimulationResult
 
 T0 = time.perf_counter()
 
@@ -169,7 +172,7 @@ def off_by_factor(rows: list[tuple[str, dict, dict]], factor: float = 2.0) -> li
 
 
 def save(fig: Any, path: Path) -> None:
-    from bwdesign.plotting import save_figure
+    from bwdesign.plotting.figures import save_figure
 
     save_figure(fig, path)
     log(f"wrote {path}")
@@ -185,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    from bwdesign.plotting import (
+    from bwdesign.plotting.figures import (
         plot_loop_poles,
         plot_mismatch_sweep,
         plot_peaking,
@@ -448,7 +451,7 @@ def main(argv: list[str] | None = None) -> int:
     md += [
         "## The digital loop: are the Section 5 constants usable at 0.2 ms?",
         "",
-        "Linear analysis (`bwdesign.loop.analyze_loop`) of the loop the experiment ran: "
+        "Linear analysis (`bwdesign.control.analyze_loop`) of the loop the experiment ran: "
         "`paper_experiment`, observer gains (8, 64, -512) mapped to the sampled observer by "
         "pole matching, lambda1 = 1, lambda2 = 2, dt = 0.2 ms; exact ZOH plant with x3 "
         "held (the linear parts of the PHSO and ESO coincide); loop broken at the plant "
@@ -569,7 +572,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "(A negative decay rate is an unstable loop.)",
         "",
-        "### Digital tuning (`bwdesign.loop.digital_tuning(params, dt)`)",
+        "### Digital tuning (`bwdesign.control.digital_tuning(params, dt)`)",
         "",
         tuning.reasoning + ".",
         "",
@@ -826,7 +829,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     (out / "paper_tables.md").write_text("\n".join(md))
     log(f"wrote {out / 'paper_tables.md'}")
-    from bwdesign.cli import json_safe
+    from bwdesign.output.jsonenc import json_safe
 
     (out / "paper_tables.json").write_text(json.dumps(json_safe(doc), indent=1))
     log(f"wrote {out / 'paper_tables.json'}")

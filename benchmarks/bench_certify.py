@@ -14,8 +14,8 @@ import sys
 import time
 
 from bwdesign import certify, preset, synthesize
-from bwdesign.certify import TIERS
-from bwdesign.lmi import solver_versions
+from bwdesign.certify.lmi import solver_versions
+from bwdesign.certify.results import TIERS
 
 CASES = [
     ("paper_experiment", (8.0, 64.0, -512.0), 360.9, 2e-4),

@@ -38,8 +38,8 @@ from bwdesign import (
     preset,
     simulate_zoh,
 )
-from bwdesign.observers import phso_step
-from bwdesign.plant import discretize
+from bwdesign.model.plant import discretize
+from bwdesign.observers.dynamics import phso_step
 
 DT = 2e-4
 GAINS = (8.0, 64.0, -512.0)

@@ -4,24 +4,14 @@ The public API is re-exported here name by name; everything else lives in
 modules whose contents may change.
 """
 
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("bwdesign")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0.0.0+unknown"
-
-from .certify import (
-    CertificateReport,
-    Margin,
-    SynthesisResult,
-    TierCertificate,
-    certify,
-    certify_discrete,
-    synthesize,
-)
-from .config import ControllerSettings, StageConfig, load_config, load_plant
-from .envelope import Envelope, derive_envelope, given_envelope
+from ._version import __version__
+from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
+from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
+from .certify.synthesis import synthesize
+from .certify.tiers import certify, certify_discrete
+from .control.analysis import LoopAnalysis, analyze_loop, mismatch_sweep
+from .control.controllers import DiscreteTrackingController, TrackingController, TuningWarning
+from .control.tuning import DigitalTuning, digital_tuning
 from .errors import (
     BWDesignError,
     ConfigError,
@@ -31,16 +21,17 @@ from .errors import (
     SolverError,
     UnboundedModelError,
 )
-from .linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
-from .loop import DigitalTuning, LoopAnalysis, analyze_loop, digital_tuning, mismatch_sweep
-from .metrics import Metrics, steady_state_window, tracking_metrics
-from .observers import ExtendedStateObserver, HysteresisObserver
-from .params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
-from .plant import hysteresis_increment, simulate_zoh, zoh_step
-from .references import Sine, Step, Triangle
-from .simulate import SimulationResult, simulate, simulate_continuous
-from .tracking import DiscreteTrackingController, TrackingController, TuningWarning
-from .ukf import UnscentedObserver
+from .model.config import ControllerSettings, StageConfig, load_config, load_plant
+from .model.envelope import Envelope, derive_envelope, given_envelope
+from .model.params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
+from .model.plant import hysteresis_increment, simulate_zoh, zoh_step
+from .model.references import Sine, Step, Triangle
+from .observers.sampled import ExtendedStateObserver, HysteresisObserver
+from .observers.ukf import UnscentedObserver
+from .sim.closed_loop import simulate
+from .sim.continuous import simulate_continuous
+from .sim.metrics import Metrics, steady_state_window, tracking_metrics
+from .sim.result import SimulationResult
 
 __all__ = [
     "__version__",

@@ -21,17 +21,13 @@ from bwdesign import (
     simulate_zoh,
     synthesize,
 )
-from bwdesign import lmi as lmi_mod
-from bwdesign.certify import (
-    TIERS,
-    continuous_equivalent,
-    rho_interval,
-    sector_interval,
-)
-from bwdesign.cli import main
-from bwdesign.linear import lipschitz_envelope
-from bwdesign.observers import discrete_gains, place_discrete
-from bwdesign.plant import discretize, phi
+from bwdesign.certify import lmi as lmi_mod
+from bwdesign.certify.checks import continuous_equivalent, rho_interval, sector_interval
+from bwdesign.certify.linear import lipschitz_envelope
+from bwdesign.certify.results import TIERS
+from bwdesign.cli.main import main
+from bwdesign.model.plant import discretize, phi
+from bwdesign.observers.gains import discrete_gains, place_discrete
 
 PAPER_GAINS = (8.0, 64.0, -512.0)
 SIM_GAINS = [(40.0, 40.0, -80.0), (80.0, 160.0, -640.0)]

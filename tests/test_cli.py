@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from bwdesign.cli import main
+from bwdesign.cli.main import main
 
 CONFIGS = Path(__file__).resolve().parents[1] / "configs"
 

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from bwdesign import InputError, Sine, Step, Triangle, derive_envelope, simulate_zoh
-from bwdesign.envelope import feedforward_input
+from bwdesign.model.envelope import feedforward_input
 
 
 def test_paper_sine_envelope(experiment):

@@ -9,8 +9,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from bwdesign import BoucWenParams, GainError, InputError, certify, preset
-from bwdesign.certify import sector_interval
-from bwdesign.linear import (
+from bwdesign.certify.checks import sector_interval
+from bwdesign.certify.linear import (
     error_dynamics,
     error_system,
     hinf_norm,

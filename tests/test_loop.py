@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 
 from bwdesign import Step, analyze_loop, mismatch_sweep, simulate
-from bwdesign.cli import json_safe
+from bwdesign.control.analysis import stability_interval
+from bwdesign.control.tuning import digital_tuning, observer_gains
 from bwdesign.errors import InputError
-from bwdesign.loop import digital_tuning, observer_gains, stability_interval
-from bwdesign.observers import discrete_gains, error_matrix
-from bwdesign.plant import discretize
+from bwdesign.model.plant import discretize
+from bwdesign.observers.gains import discrete_gains, error_matrix
+from bwdesign.output.jsonenc import json_safe
 
 DT = 2e-4
 PAPER_GAINS = (8.0, 64.0, -512.0)
@@ -251,7 +252,7 @@ def test_digital_tuning_lightly_damped_stages(config):
     chosen tuning tracks the config's reference stably with the computation delay."""
     from pathlib import Path
 
-    from bwdesign.config import load_config
+    from bwdesign.model.config import load_config
 
     c = load_config(Path(__file__).resolve().parents[1] / "configs" / f"{config}.toml")
     t = digital_tuning(c.plant, c.dt)

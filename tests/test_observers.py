@@ -18,17 +18,9 @@ from bwdesign import (
     preset,
     simulate_zoh,
 )
-from bwdesign.observers import (
-    C,
-    discrete_gains,
-    error_matrix,
-    eso_rhs,
-    eso_step,
-    observer_iosystem,
-    phso_rhs,
-    phso_step,
-)
-from bwdesign.plant import discretize, rhs
+from bwdesign.model.plant import discretize, rhs
+from bwdesign.observers.dynamics import eso_rhs, eso_step, observer_iosystem, phso_rhs, phso_step
+from bwdesign.observers.gains import C, discrete_gains, error_matrix
 
 DT = 2e-4
 GAINS_41 = [(40.0, 40.0, -80.0), (80.0, 160.0, -640.0)]
@@ -479,7 +471,7 @@ def test_import_does_not_load_matplotlib_control_or_filterpy():
 
 
 def test_observer_plots_render(tmp_path, experiment):
-    from bwdesign.plotting import plot_estimation_errors, plot_observer_states, save_figure
+    from bwdesign.plotting.figures import plot_estimation_errors, plot_observer_states, save_figure
 
     u, zs = _record(experiment, seed=1, n=200, missing=False)
     X = simulate_zoh(experiment, u, DT, (1.0, 0.0, 0.3), u_prev=0.0)[1:]

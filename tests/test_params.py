@@ -10,7 +10,7 @@ from bwdesign import (
     load_plant,
     preset,
 )
-from bwdesign.params import require_bounded
+from bwdesign.model.params import require_bounded
 
 GOOD = dict(a1=159827.5, a2=713.8, a3=222665.02, alpha=0.4795, beta=0.3762, gamma=0.0378)
 

@@ -10,8 +10,8 @@ from scipy.integrate import solve_ivp
 
 from bwdesign import UnboundedModelError, hysteresis_increment, preset, simulate_zoh, zoh_step
 from bwdesign.errors import InputError
-from bwdesign.params import BoucWenParams
-from bwdesign.plant import discretize, rhs
+from bwdesign.model.params import BoucWenParams
+from bwdesign.model.plant import discretize, rhs
 
 DT = 2e-4
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from bwdesign import ConfigError, Sine, Step, Triangle
-from bwdesign.references import reference_from_dict
+from bwdesign.model.references import reference_from_dict
 
 
 def _num_derivative(f, t, h=1e-6):

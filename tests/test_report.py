@@ -5,9 +5,10 @@ from pathlib import Path
 
 import pytest
 
-from bwdesign.cli import dump_json, main
-from bwdesign.config import load_config
-from bwdesign.report import certificate_document, write_report
+from bwdesign.cli.main import main
+from bwdesign.model.config import load_config
+from bwdesign.output.jsonenc import dump_json
+from bwdesign.report.certified import certificate_document, write_report
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "paper_experiment.toml"
@@ -136,7 +137,7 @@ def test_failure_leaves_existing_report_untouched(tmp_path, monkeypatch):
     out = tmp_path / "out"
     out.mkdir()
     (out / "report.md").write_text("previous")
-    import bwdesign.report as report
+    import bwdesign.report.certified as report
 
     def boom(*a, **k):
         raise RuntimeError("simulated crash")

@@ -16,11 +16,12 @@ from bwdesign import (
     simulate,
     simulate_continuous,
 )
-from bwdesign.cli import json_safe, main
+from bwdesign.cli.main import main
+from bwdesign.control.tuning import observer_gains
 from bwdesign.errors import GainError, InputError, UnboundedModelError
-from bwdesign.loop import observer_gains
-from bwdesign.metrics import steady_state_window
-from bwdesign.simulate import _solve_udot
+from bwdesign.output.jsonenc import json_safe
+from bwdesign.sim.continuous import _solve_udot
+from bwdesign.sim.metrics import steady_state_window
 
 DT = 2e-4
 SINE = Sine(amplitude=80.0, offset=100.0, frequency=1.0)

@@ -7,9 +7,7 @@ import numpy as np
 import pytest
 
 from bwdesign import DiscreteTrackingController, TrackingController, TuningWarning
-from bwdesign.errors import GainError, InputError
-from bwdesign.plant import discretize, hysteresis_increment
-from bwdesign.tracking import (
+from bwdesign.control.controllers import (
     discrete_error_gains,
     discrete_integral_gains,
     eq12,
@@ -17,6 +15,8 @@ from bwdesign.tracking import (
     make_controller,
     solve_jump,
 )
+from bwdesign.errors import GainError, InputError
+from bwdesign.model.plant import discretize, hysteresis_increment
 
 DT = 2e-4
 

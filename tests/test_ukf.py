@@ -8,8 +8,8 @@ import pytest
 from filterpy.common import Saver
 
 from bwdesign import InputError, UnscentedObserver, preset, simulate_zoh, zoh_step
-from bwdesign.plant import discretize
-from bwdesign.ukf import default_noise, max_hysteresis_slope
+from bwdesign.model.plant import discretize
+from bwdesign.observers.ukf import default_noise, max_hysteresis_slope
 
 DT = 2e-4
 

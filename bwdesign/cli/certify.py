@@ -9,17 +9,12 @@ from __future__ import annotations
 import argparse
 import math
 
-from .certify import CertificateReport, SynthesisResult, certify, synthesize
-from .cli import (
-    EXIT_NO,
-    EXIT_OK,
-    add_plant_args,
-    dump_json,
-    gains_triple,
-    nonneg_float,
-    positive_float,
-)
-from .config import load_plant
+from ..certify.results import CertificateReport, SynthesisResult
+from ..certify.synthesis import synthesize
+from ..certify.tiers import certify
+from ..model.config import load_plant
+from ..output.jsonenc import dump_json
+from .args import EXIT_NO, EXIT_OK, add_plant_args, gains_triple, nonneg_float, positive_float
 
 __all__ = ["certify_args", "run_certify", "synthesize_args", "run_synthesize"]
 

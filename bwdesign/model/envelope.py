@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from .errors import InputError
+from ..errors import InputError
 from .params import BoucWenParams, require_bounded
 from .plant import hysteresis_increment
 from .references import Reference

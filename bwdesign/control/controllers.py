@@ -25,7 +25,7 @@ Two forms are provided:
   plant's spring force by ``dt/2`` on average, which acts as an extra velocity
   feedback ``a1 dt/2`` (16 1/s for the paper's stage at 0.2 ms): the printed
   law is *not* what runs on a digital controller unless ``a1 dt`` is small
-  against ``lambda1 + lambda2``. See :mod:`bwdesign.loop`.
+  against ``lambda1 + lambda2``. See :mod:`bwdesign.control`.
 - :class:`DiscreteTrackingController` (``form = "discrete"``): the sampled
   form of the same design. ``(k1, k2)`` are placed on the exact ZOH model so
   the sampled error poles are ``exp(-lambda1 dt)`` and ``exp(-lambda2 dt)``;
@@ -37,7 +37,7 @@ Two forms are provided:
 
 Hysteresis jump (sampled loops with the PHSO). Under ZOH the input ``u_k``
 makes the hysteresis jump at ``t_k`` from ``x3`` to ``H(x3, u_{k-1}, u_k)``
-(:func:`bwdesign.plant.hysteresis_increment`), and that post-jump value is
+(:func:`bwdesign.model.plant.hysteresis_increment`), and that post-jump value is
 what the plant feels over the whole hold interval. Eq. (12) evaluated on the
 posterior estimate cancels the *pre*-jump value: one sample late, which
 leaves an error of order ``a1 dh/du du/dt dt / lambda^2`` (0.04 um for the
@@ -50,7 +50,7 @@ hysteresis model, so it is meaningful with the PHSO only.
 
 Saturation. ``u_limits = (u_min, u_max)`` (V) clips the output, as a real
 amplifier does. The observer must then be driven with the *clipped* value
-(that is what the plant receives), which :func:`bwdesign.simulate.simulate`
+(that is what the plant receives), which :func:`bwdesign.sim.simulate`
 does. ``estimate_limits`` clips the estimate before it enters the law: the
 standard remedy against observer peaking (Khalil), which keeps a transient
 estimate outside the operating range from producing a huge control.
@@ -61,7 +61,7 @@ necessary: the linear loop is stable for every ``lambda1, lambda2 > 0`` with
 a converged observer. bwdesign therefore rejects ``lambda1 <= 0`` or
 ``lambda2 <= 0`` (:class:`~bwdesign.errors.GainError`) and only *warns*
 (:class:`TuningWarning`) when ``0 < lambda2 <= 3/2``: the paper's proof does
-not cover that tuning, but :mod:`bwdesign.loop` can still certify the loop.
+not cover that tuning, but :mod:`bwdesign.control` can still certify the loop.
 """
 
 from __future__ import annotations
@@ -73,9 +73,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import GainError, InputError
-from .params import BoucWenParams
-from .plant import _check_dt, discretize, hysteresis_increment
+from ..errors import GainError, InputError
+from ..model.params import BoucWenParams
+from ..model.plant import _check_dt, discretize, hysteresis_increment
 
 __all__ = [
     "TrackingController",
@@ -215,7 +215,7 @@ def _check_lambdas(lambda1: Any, lambda2: Any) -> tuple[float, float]:
         warnings.warn(
             f"lambda2 = {l2:g} <= 3/2: outside the paper's Lyapunov proof (eq. 18 needs "
             "lambda2 > 3/2); the linear loop may still be stable, check it with "
-            "bwdesign.loop.analyze_loop",
+            "bwdesign.control.analyze_loop",
             TuningWarning,
             stacklevel=3,
         )
@@ -546,7 +546,7 @@ class DiscreteTrackingController(TrackingController):
 def solve_jump(params: BoucWenParams, u0: float, c: float, h: float, u_prev: float) -> float:
     """Solve ``u = u0 + c H(h, u_prev, u)`` for ``u`` (V).
 
-    ``H`` is :func:`bwdesign.plant.hysteresis_increment`. The residual
+    ``H`` is :func:`bwdesign.model.plant.hysteresis_increment`. The residual
     ``u - u0 - c H`` has slope ``1 - c dh/du``; while ``c dh/du < 1`` the root
     is unique and Newton from ``u0 + c h`` converges in a few steps. Where the
     relation is ill-posed or nearly so (``c dh/du > 0.9``, which happens only

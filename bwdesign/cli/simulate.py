@@ -1,6 +1,6 @@
 """``bwdesign simulate`` (registered in :mod:`bwdesign.cli`).
 
-Runs the sampled-data tracking loop of :func:`bwdesign.simulate.simulate` and
+Runs the sampled-data tracking loop of :func:`bwdesign.sim.simulate` and
 prints the steady-state metrics. Exit codes: 0 the loop ran and stayed
 bounded, 1 it diverged (reported, not an error), 2 bad input with one
 ``error:`` line and nothing written.
@@ -16,20 +16,21 @@ from pathlib import Path
 
 import numpy as np
 
-from .cli import (
+from ..model.config import load_plant
+from ..model.references import Sine, Step, Triangle
+from ..output.jsonenc import dump_json
+from ..sim.closed_loop import simulate
+from ..sim.result import SimulationResult
+from .args import (
     EXIT_NO,
     EXIT_OK,
     UsageError,
     add_plant_args,
-    dump_json,
     finite_float,
     gains_triple,
     nonneg_float,
     positive_float,
 )
-from .config import load_plant
-from .references import Sine, Step, Triangle
-from .simulate import SimulationResult, simulate
 
 __all__ = ["simulate_args", "run_simulate"]
 

@@ -1,6 +1,6 @@
 """The certified-gains report: one stage configuration in, a report to hand on out.
 
-:func:`write_report` turns a :class:`~bwdesign.config.StageConfig` into a
+:func:`write_report` turns a :class:`~bwdesign.model.config.StageConfig` into a
 directory holding ``report.md``, a self-contained ``report.html``,
 ``certificate.json`` and ``figures/*.png``. Everything is computed here from
 the configuration; nothing is edited by hand. The directory is built under a
@@ -29,17 +29,21 @@ from typing import Any
 
 import numpy as np
 
-from .certify import CertificateReport, SynthesisResult, certify, synthesize
-from .cli import dump_json, plant_summary
-from .config import StageConfig
+from ..certify.linear import error_dynamics, hysteresis_bode
+from ..certify.results import CertificateReport, SynthesisResult
+from ..certify.synthesis import synthesize
+from ..certify.tiers import certify
+from ..control.analysis import analyze_loop
+from ..control.tuning import digital_tuning
+from ..errors import ConfigError
+from ..model.config import StageConfig
+from ..model.envelope import Envelope
+from ..model.params import require_bounded
+from ..model.summary import plant_summary
+from ..observers.gains import discrete_gains
+from ..output.jsonenc import dump_json
+from ..sim.closed_loop import simulate
 from .document import Document
-from .envelope import Envelope
-from .errors import ConfigError
-from .linear import error_dynamics, hysteresis_bode
-from .loop import analyze_loop, digital_tuning
-from .observers import discrete_gains
-from .params import require_bounded
-from .simulate import simulate
 
 __all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DECAY"]
 
@@ -276,7 +280,7 @@ def build_report(
 
     Returns the document, the certificate JSON document, the verdict flag and sentence.
     """
-    from . import plotting
+    from ..plotting import figures as plotting
 
     say = _progress(quiet)
     params = config.plant
@@ -626,9 +630,6 @@ def write_report(
     ConfigError
         A section the report needs is missing.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
     out_dir = Path(out_dir)
     parent = out_dir.resolve().parent
     parent.mkdir(parents=True, exist_ok=True)

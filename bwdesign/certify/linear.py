@@ -33,10 +33,10 @@ from typing import Any
 
 import numpy as np
 
-from .certify import _scale_continuous, sector_interval
-from .errors import InputError
-from .observers import check_gains, error_matrix
-from .params import BoucWenParams
+from ..errors import InputError
+from ..model.params import BoucWenParams
+from ..observers.gains import check_gains, error_matrix
+from .checks import _scale_continuous, sector_interval
 
 __all__ = [
     "ErrorDynamics",

@@ -3,7 +3,7 @@
 :class:`UnscentedObserver` wraps :class:`filterpy.kalman.UnscentedKalmanFilter`
 with the *exact* sampled plant as its process model (state x1, x2, x3; the
 hysteresis follows the jump ``u_{k-1} -> u_k`` in closed form, then the linear
-part is propagated with the ZOH matrices: :func:`bwdesign.plant.zoh_step`) and
+part is propagated with the ZOH matrices: :func:`bwdesign.model.plant.zoh_step`) and
 ``y = x1`` as its measurement model. It has the interface of the other
 observers (``predict(u)``, ``update(z)``, ``batch_filter(zs, us)``, ``x``,
 ``x_prior``, ``x_post``), plus the covariances ``P``, ``P_prior``, ``P_post``.
@@ -40,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InputError
-from .observers import _finite_scalar, _inputs, _measurements
-from .params import BoucWenParams, require_bounded
-from .plant import _check_dt, discretize, zoh_step
+from ..errors import InputError
+from ..model.params import BoucWenParams, require_bounded
+from ..model.plant import _check_dt, discretize, zoh_step
+from .base import _finite_scalar, _inputs, _measurements
 
 __all__ = ["UnscentedObserver", "default_noise", "max_hysteresis_slope"]
 

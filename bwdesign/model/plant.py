@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from .errors import InputError
+from ..errors import InputError
 from .params import BoucWenParams, require_bounded
 
 __all__ = [
@@ -111,7 +111,7 @@ def hysteresis_increment(params: BoucWenParams, h: float, u0: float, u1: float) 
 
     Examples
     --------
-    >>> from bwdesign.params import preset
+    >>> from bwdesign.model.params import preset
     >>> p = preset("paper_experiment")
     >>> h = hysteresis_increment(p, 0.0, 0.0, 100.0)   # saturates at alpha/(beta+gamma)
     >>> abs(h - p.alpha / (p.beta + p.gamma)) < 1e-9

@@ -18,7 +18,7 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-from .errors import ParameterError, UnboundedModelError
+from ..errors import ParameterError, UnboundedModelError
 
 __all__ = [
     "BoucWenParams",
@@ -382,7 +382,7 @@ PRESET_NOTES: dict[str, str] = {
 
 def preset(name: str) -> BoucWenParams:
     """Return a bundled parameter set by name (see :data:`PRESETS`)."""
-    from .errors import ConfigError
+    from ..errors import ConfigError
 
     try:
         return PRESETS[name]

@@ -170,7 +170,7 @@ def plot_estimation_errors(
     return fig, axes
 
 
-# -- tracking loop (bwdesign.simulate, bwdesign.loop) ------------------------------
+# -- tracking loop (bwdesign.simulate, bwdesign.control) ------------------------------
 
 __all__ += [
     "plot_simulation",
@@ -369,7 +369,7 @@ def plot_loop_poles(analyses: dict[str, Any], *, title: str = ""):
 
     Parameters
     ----------
-    analyses : dict of str to bwdesign.loop.LoopAnalysis
+    analyses : dict of str to bwdesign.control.LoopAnalysis
         Sampled analyses (``dt`` set) by label.
 
     Returns
@@ -414,7 +414,7 @@ def plot_mismatch_sweep(sweeps: dict[str, Any], *, title: str = ""):
 
     Parameters
     ----------
-    sweeps : dict of str to bwdesign.loop.MismatchSweep
+    sweeps : dict of str to bwdesign.control.MismatchSweep
 
     Returns
     -------
@@ -487,7 +487,7 @@ def plot_hysteresis_bode(
 
     Parameters
     ----------
-    bodes : dict of str to bwdesign.linear.HysteresisBode
+    bodes : dict of str to bwdesign.certify.linear.HysteresisBode
     lipschitz_coeff : float
         ``|beta| + |gamma|`` (1/V).
     udot_max : float

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ConfigError
+from ..errors import ConfigError
 
 __all__ = ["Reference", "Sine", "Triangle", "Step", "reference_from_dict"]
 

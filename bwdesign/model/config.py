@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..errors import BWDesignError, ConfigError, ParameterError
 from .envelope import Envelope, derive_envelope, given_envelope
-from .errors import BWDesignError, ConfigError, ParameterError
 from .params import PRESETS, BoucWenParams, preset
 from .references import Reference, reference_from_dict
 

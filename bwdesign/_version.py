@@ -1,0 +1,8 @@
+"""The package version, from the installed distribution's metadata (one source: pyproject)."""
+
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("bwdesign")
+except PackageNotFoundError:  # running from a source tree without installation
+    __version__ = "0.0.0+unknown"

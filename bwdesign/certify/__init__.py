@@ -1,0 +1,39 @@
+"""Certificates: result types, the four tiers, LMI synthesis (the only cvxpy, in :mod:`.lmi`) and
+the linear analysis of the error dynamics.
+"""
+
+from .checks import continuous_equivalent, rho_interval, sector_interval
+from .linear import (
+    ErrorDynamics,
+    HysteresisBode,
+    error_dynamics,
+    error_system,
+    hinf_norm,
+    hysteresis_bode,
+    lipschitz_envelope,
+)
+from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCertificate
+from .synthesis import default_pole_radius, synthesize
+from .tiers import certify, certify_discrete
+
+__all__ = [
+    "TIERS",
+    "Margin",
+    "TierCertificate",
+    "CertificateReport",
+    "SynthesisResult",
+    "continuous_equivalent",
+    "sector_interval",
+    "rho_interval",
+    "certify",
+    "certify_discrete",
+    "synthesize",
+    "default_pole_radius",
+    "ErrorDynamics",
+    "HysteresisBode",
+    "error_system",
+    "error_dynamics",
+    "hinf_norm",
+    "hysteresis_bode",
+    "lipschitz_envelope",
+]

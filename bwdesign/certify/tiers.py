@@ -1,0 +1,521 @@
+"""Certified observer gains: four certificate tiers and LMI gain synthesis.
+
+The observer error ``eps = x_hat - x`` of the hysteresis observer (paper eq. 3)
+obeys (DESIGN.md section 3)::
+
+    eps' = A eps + e3 phi~,   A = A0 - l C,   C = e1',
+    A0 = [[0, 1, 0], [-a1, -a2, -a1], [0, 0, 0]],
+    phi~ = -k(t) eps3,  k in [min(0, (beta - |gamma|) v), max(0, (beta + |gamma|) v)]
+
+for ``|u'| <= v`` (``v = udot_max``, V/s). The tiers, weakest first:
+
+``theorem1``
+    The paper's argument with the sign corrected: ``A'P + PA <= -q I`` and
+    ``|phi~| <= L ||eps||`` with ``L = (|beta| + |gamma|) v`` give
+    ``V' <= -(q - 2 L ||P||) ||eps||^2``, so it holds iff ``2 L ||P|| < q``.
+    Checked for the Lyapunov-equation ``P`` (``q = 1``) and for the least-norm
+    ``P`` of the LMI ``A'P + PA <= -I``. Envelope and decay are closed form.
+    (The two norms coincide: the Lyapunov operator is monotone, so the
+    Lyapunov-equation ``P`` is the least element of that LMI's feasible set;
+    the LMI is solved in ``Q = -(A'P + PA) >= I``, where it is well conditioned,
+    as a cross-check.)
+``lipschitz``
+    S-procedure LMI using only ``|phi~| <= L |eps3|``:
+    ``[[A'P + PA + 2 mu P + L^2 e3 e3', P e3], [e3' P, -1]] < 0``. By the KYP
+    lemma this is ``||e3' (sI - A - mu I)^-1 e3||_inf < 1/L``.
+``sector``
+    A common quadratic Lyapunov function for ``A - k e3 e3'`` at both ends of
+    the ``k`` interval (polytopic LMI); it keeps the sign information
+    (``beta >= |gamma|`` makes the hysteresis error dissipative).
+``sampled`` (when ``dt`` is given)
+    The observer that runs at sample time ``dt`` in predict/update form has
+    posterior error ``eps_{k+1} = (I - K C) F diag(1, 1, rho_k) eps_k`` with
+    ``F = expm(A0 dt)`` and ``rho_k`` the slope of the exact hysteresis jump
+    map, ``rho in [min(1, exp(-(beta + |gamma|) v dt)),
+    max(1, exp(-(beta - |gamma|) v dt))]``. The tier is the polytopic discrete
+    LMI ``A_d' P A_d <= r^2 P`` over the two ends; decay ``mu = -ln(r)/dt``.
+    Continuous gains are mapped to ``K`` by pole matching with the observers'
+    own :func:`bwdesign.observers.discrete_gains`, so the tier certifies exactly
+    the gain the sampled :class:`~bwdesign.HysteresisObserver` runs.
+
+Numerics: every LMI is solved in scaled coordinates (``x2`` scaled by
+``w0 = sqrt(a1)``, time by ``w0``, then diagonal balancing), because ``a1``
+spans 1e3..1e9. The solver's matrices are mapped back, and a tier says
+``holds: true`` only after ``P > 0`` and every LMI block has been re-checked in
+the original coordinates with ``numpy.linalg.eigvalsh`` (see :class:`Margin`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from scipy.linalg import solve_continuous_lyapunov
+
+from ..errors import InputError
+from ..model.params import BoucWenParams, require_bounded
+from ..model.plant import _check_dt
+from ..observers.gains import _as_gains, check_gains, discrete_gains, error_matrix
+from .checks import (
+    _Check,
+    _check_lipschitz,
+    _check_sampled,
+    _check_sector,
+    _cont_err,
+    _lipschitz_coefficient,
+    _posdef,
+    _prepare_sampled,
+    _rate,
+    _scale_continuous,
+    _Scaled,
+    _similar,
+    rho_interval,
+    sector_interval,
+)
+from .results import (
+    _U,
+    BISECT_RTOL,
+    K_HAT_CAP,
+    TIERS,
+    CertificateReport,
+    Margin,
+    TierCertificate,
+    _frozen,
+)
+
+__all__ = ["certify", "certify_discrete"]
+
+
+# -- bisections ---------------------------------------------------------------------
+
+
+def _largest_rate(
+    pred: Callable[[float], bool], start: float, cap: float, rtol: float = BISECT_RTOL
+) -> tuple[float, bool]:
+    """Largest ``v`` in ``(0, cap]`` with ``pred(v)`` (monotone), to ``rtol``.
+
+    Returns ``(v, capped)``; ``(0, False)`` when nothing down to ``1e-12 cap`` holds.
+    """
+    if not math.isfinite(cap):
+        cap = start * 1e12
+    x = min(start, cap)
+    if pred(x):
+        lo = x
+        while True:
+            if lo >= cap:
+                return cap, True
+            nxt = min(lo * 4.0, cap)
+            if pred(nxt):
+                lo = nxt
+            else:
+                hi = nxt
+                break
+    else:
+        hi = x
+        floor = cap * 1e-12
+        while True:
+            nxt = hi / 4.0
+            if nxt < floor:
+                return 0.0, False
+            if pred(nxt):
+                lo = nxt
+                break
+            hi = nxt
+    while hi / lo > 1.0 + rtol:
+        mid = math.sqrt(lo * hi)
+        if pred(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo, False
+
+
+def _largest_decay(pred: Callable[[float], bool], cap: float, rtol: float = BISECT_RTOL) -> float:
+    """Largest ``mu`` in ``[0, cap)`` with ``pred(mu)``, to ``rtol`` (0 if none)."""
+    if not (cap > 0 and math.isfinite(cap)) or not pred(0.0):
+        return 0.0
+    hi = cap
+    x = cap / 2.0
+    floor = cap * 1e-9
+    while not pred(x):
+        hi = x
+        x /= 4.0
+        if x < floor:
+            return 0.0
+    lo = x
+    while hi / lo > 1.0 + rtol:
+        mid = math.sqrt(lo * hi)
+        if pred(mid):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def _search_cap(params: BoucWenParams) -> float:
+    c = _lipschitz_coefficient(params)
+    return K_HAT_CAP * math.sqrt(params.a1) / c if c > 0 else math.inf
+
+
+def _lmi_tier(
+    name: str,
+    check: Callable[[float, float], _Check],
+    *,
+    udot_max: float,
+    decay: float,
+    cap: float,
+    decay_cap: Callable[[float], float],
+    details: dict[str, Any],
+    every_rate: Callable[[float], _Check] | None = None,
+) -> TierCertificate:
+    check = functools.lru_cache(maxsize=None)(check)
+    main = check(udot_max, decay)
+    if main.ok and every_rate is not None and every_rate(decay).ok:
+        max_udot, capped = math.inf, False
+    else:
+        max_udot, capped = _largest_rate(lambda v: check(v, decay).ok, udot_max, cap)
+    rate = _largest_decay(lambda m: check(udot_max, m).ok, decay_cap(udot_max))
+    if main.ok and rate < decay:
+        rate = decay  # the requested decay itself was verified
+    if main.t is not None:
+        details = {**details, "lmi_margin": main.t}
+    return TierCertificate(
+        name=name,
+        holds=main.ok,
+        udot_max=udot_max,
+        decay=decay,
+        max_udot=max_udot,
+        max_udot_capped=capped,
+        decay_rate=rate,
+        P=main.P,
+        margins=main.margins,
+        solver=main.solver,
+        status=main.status,
+        details=dict(details),
+    )
+
+
+# -- the tiers ----------------------------------------------------------------------
+
+
+def _theorem1(params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float) -> TierCertificate:
+    from . import lmi
+
+    c = _lipschitz_coefficient(params)
+    L = c * udot_max
+    A = sc.A
+
+    # Lyapunov equation A'P + PA = -Q in scaled form: Ahat'X + X Ahat = -S'QS,
+    # P = S^-T X S^-1 / w.
+    def lyap(Qm: np.ndarray) -> np.ndarray:
+        rhs = sc.s[:, None] * Qm * sc.s[None, :]
+        scale = float(np.abs(rhs).max())
+        X = solve_continuous_lyapunov(sc.Ahat.T, -rhs / scale)
+        return scale * ((X + X.T) / 2) / np.outer(sc.s, sc.s) / sc.w
+
+    P_lyap = lyap(np.eye(3))
+    candidates: list[tuple[str, np.ndarray, str]] = [("lyapunov", P_lyap, "scipy")]
+    # least-norm P over A'P + PA <= -I, as an LMI in Q = -(A'P + PA) >= I
+    nL = float(np.linalg.eigvalsh(P_lyap).max())
+    basis = {}
+    for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
+        E = np.zeros((3, 3))
+        E[i, j] = E[j, i] = 1.0
+        basis[(i, j)] = lyap(E)
+    sol = lmi.least_norm_lyapunov({k: v / nL for k, v in basis.items()})
+    lmi_status = sol.status
+    if sol.ok:
+        Qs = np.asarray(sol["Q"])
+        P_lmi = sum(Qs[i, j] * B for (i, j), B in basis.items())
+        candidates.append(("lmi", (P_lmi + P_lmi.T) / 2, sol.solver))
+
+    results = []
+    for label, P, solver in candidates:
+        pos = _posdef("P > 0", P)
+        M = A.T @ P + P @ A
+        err = float(np.linalg.norm(_cont_err(A, P, 0.0), "fro"))
+        q = -(float(np.linalg.eigvalsh((M + M.T) / 2).max()) + err)
+        nP = float(np.linalg.eigvalsh(P).max()) * (1 + 8 * _U)
+        ok_P = pos.passed and q > 0 and nP > 0
+        results.append((label, P, solver, pos, q, nP, ok_P))
+
+    details: dict[str, Any] = {"L": L, "lmi_status": lmi_status}
+    for label, _, _, _, q, nP, _ in results:
+        details[f"norm_P_{label}"] = nP
+        details[f"q_{label}"] = q
+        details[f"two_L_norm_P_{label}"] = 2 * L * nP
+    details["two_L_norm_P"] = details["two_L_norm_P_lyapunov"]
+
+    usable = [r for r in results if r[6]]
+    if not usable:
+        return TierCertificate(
+            name="theorem1",
+            holds=False,
+            udot_max=udot_max,
+            decay=decay,
+            max_udot=0.0,
+            max_udot_capped=False,
+            decay_rate=0.0,
+            P=None,
+            margins=tuple(r[3] for r in results),
+            solver="scipy",
+            status="not certified: no Lyapunov matrix passed the outside check",
+            details=dict(details),
+        )
+    # best candidate: the one with the largest envelope q / (2 c ||P||)
+    best = max(usable, key=lambda r: r[4] / r[5])
+    label, P, solver, pos, q, nP, _ = best
+    rate = max(0.0, (q - 2 * L * nP) / (2 * nP))
+    max_udot = max(0.0, (q - 2 * decay * nP) / (2 * c * nP)) if c > 0 else math.inf
+    shortfall = 2 * L * nP / q
+    details["P_used"] = label
+    details["shortfall"] = shortfall
+    margins = (pos, Margin("2 L ||P|| < q", 2 * L * nP, q))
+    holds = margins[1].passed and rate >= decay
+    if holds:
+        status = "certified"
+    elif not margins[1].passed:
+        status = (
+            f"not certified: 2 L ||P|| / q = {shortfall:.4g} >= 1 "
+            f"(Theorem 1 falls short by this factor)"
+        )
+    else:
+        status = f"not certified: decay {rate:.4g} 1/s < requested {decay:g} 1/s"
+    return TierCertificate(
+        name="theorem1",
+        holds=holds,
+        udot_max=udot_max,
+        decay=decay,
+        max_udot=max_udot,
+        max_udot_capped=False,
+        decay_rate=rate,
+        P=_frozen(P) if holds else None,
+        margins=margins,
+        solver=solver,
+        status=status,
+        details=dict(details),
+    )
+
+
+def _lipschitz(
+    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float
+) -> TierCertificate:
+    c = _lipschitz_coefficient(params)
+    alpha0 = -sc.spectral_abscissa()
+    return _lmi_tier(
+        "lipschitz",
+        lambda v, m: _check_lipschitz(sc, c * v, m),
+        udot_max=udot_max,
+        decay=decay,
+        cap=_search_cap(params),
+        decay_cap=lambda v: alpha0,
+        details={"L": c * udot_max},
+    )
+
+
+def _sector(params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float) -> TierCertificate:
+    def cap_at(v: float) -> float:
+        return -max(sc.spectral_abscissa(k) for k in sector_interval(params, v))
+
+    k_lo, k_hi = sector_interval(params, udot_max)
+    return _lmi_tier(
+        "sector",
+        lambda v, m: _check_sector(sc, *sector_interval(params, v), m),
+        udot_max=udot_max,
+        decay=decay,
+        cap=_search_cap(params),
+        decay_cap=cap_at,
+        details={"k_interval": [k_lo, k_hi]},
+    )
+
+
+def _sampled(
+    params: BoucWenParams, K: np.ndarray, udot_max: float, decay: float, dt: float
+) -> TierCertificate:
+    sp = _prepare_sampled(params, K, dt)
+    c = _lipschitz_coefficient(params)
+    cap = min(_search_cap(params), 50.0 / (c * dt)) if c > 0 else math.inf
+
+    def check(v: float, m: float) -> _Check:
+        lo, hi = rho_interval(params, v, dt)
+        return _check_sampled(sp, lo, hi, math.exp(-m * dt))
+
+    def every_rate(m: float) -> _Check:
+        # beta >= |gamma|: rho in [exp(-(beta + |gamma|) v dt), 1] within [0, 1] for every v
+        return _check_sampled(sp, 0.0, 1.0, math.exp(-m * dt))
+
+    def decay_cap(v: float) -> float:
+        radii = []
+        for rho in rho_interval(params, v, dt):
+            if not math.isfinite(rho):
+                return 0.0
+            Ad = sp.IKC_F.copy()
+            Ad[:, 2] *= rho
+            radii.append(float(np.max(np.abs(np.linalg.eigvals(_similar(Ad, sp.s))))))
+        rmax = max(radii)
+        return -math.log(rmax) / dt if 0 < rmax < 1 else (math.inf if rmax == 0 else 0.0)
+
+    def capped_decay(v: float) -> float:
+        cap_v = decay_cap(v)
+        return cap_v if math.isfinite(cap_v) else 50.0 / dt
+
+    rho_lo, rho_hi = rho_interval(params, udot_max, dt)
+    return _lmi_tier(
+        "sampled",
+        check,
+        udot_max=udot_max,
+        decay=decay,
+        cap=cap,
+        decay_cap=capped_decay,
+        details={
+            "dt": dt,
+            "rho_interval": [rho_lo, rho_hi],
+            "discrete_gains": [float(x) for x in K],
+            "r": math.exp(-decay * dt),
+        },
+        every_rate=every_rate if params.beta >= abs(params.gamma) else None,
+    )
+
+
+_CONTINUOUS_TIERS = {"theorem1": _theorem1, "lipschitz": _lipschitz, "sector": _sector}
+
+
+# -- public entry points ---------------------------------------------------------------
+
+
+def certify(
+    params: BoucWenParams,
+    gains: Sequence[float],
+    *,
+    udot_max: float,
+    decay: float = 0.0,
+    dt: float | None = None,
+    tiers: Sequence[str] | None = None,
+    allow_unbounded: bool = False,
+) -> CertificateReport:
+    """Certify observer gains for an input-rate envelope, tier by tier.
+
+    Parameters
+    ----------
+    params : BoucWenParams
+        The stage.
+    gains : sequence of 3 floats
+        Continuous observer gains ``(l1, l2, l3)`` (1/s, 1/s^2, 1/s).
+    udot_max : float
+        Bound on ``|u'|`` (V/s), > 0.
+    decay : float
+        Required exponential decay rate of the estimation error (1/s), >= 0.
+    dt : float, optional
+        Sample time (s); adds the ``sampled`` tier for the predict/update
+        observer with the pole-matched discrete gain
+        :func:`bwdesign.observers.discrete_gains`.
+    tiers : sequence of str, optional
+        Compute only these tiers (names from :data:`TIERS`); default all
+        (``sampled`` only when ``dt`` is given).
+    allow_unbounded : bool
+        Accept a model outside the bounded Bouc-Wen class.
+
+    Returns
+    -------
+    CertificateReport
+        One :class:`TierCertificate` per tier. Solver trouble is a status in
+        the report, never an exception.
+
+    Raises
+    ------
+    GainError
+        Malformed gains, or gains violating the paper's Hurwitz conditions (4).
+    InputError
+        ``udot_max``, ``decay`` or ``dt`` out of range.
+    UnboundedModelError
+        The model is outside the bounded class and ``allow_unbounded`` is False.
+
+    Examples
+    --------
+    >>> from bwdesign import preset
+    >>> rep = certify(preset("paper_experiment"), (8, 64, -512), udot_max=360.9)
+    >>> rep.tier("theorem1").holds, rep.tier("sector").holds
+    (False, True)
+    """
+    require_bounded(params, allow_unbounded)
+    udot_max = _rate(udot_max, "udot_max (V/s)", positive=True)
+    decay = _rate(decay, "decay (1/s)", positive=False)
+    if dt is not None:
+        dt = _check_dt(dt)
+    gains = tuple(check_gains(params, gains).tolist())
+    sc = _scale_continuous(params, error_matrix(params, gains))
+    if tiers is None:
+        wanted = TIERS if dt is not None else TIERS[:3]
+    else:
+        wanted = tuple(tiers) if not isinstance(tiers, str) else (tiers,)
+        unknown = [t for t in wanted if t not in TIERS]
+        if unknown:
+            raise InputError(f"unknown tier(s) {unknown}; tiers are {', '.join(TIERS)}")
+        if "sampled" in wanted and dt is None:
+            raise InputError("the sampled tier needs the sample time dt (s)")
+    certs = []
+    for name in TIERS:
+        if name in wanted and name != "sampled":
+            certs.append(_CONTINUOUS_TIERS[name](params, sc, udot_max, decay))
+    K = None
+    if dt is not None:
+        K = discrete_gains(params, gains, dt)
+        if "sampled" in wanted:
+            certs.append(_sampled(params, K, udot_max, decay, dt))
+    return CertificateReport(
+        params=params,
+        gains=gains,
+        udot_max=udot_max,
+        decay=decay,
+        dt=dt,
+        discrete_gains=None if K is None else (float(K[0]), float(K[1]), float(K[2])),
+        certificates=tuple(certs),
+    )
+
+
+def certify_discrete(
+    params: BoucWenParams,
+    K: Sequence[float],
+    *,
+    udot_max: float,
+    dt: float,
+    decay: float = 0.0,
+    allow_unbounded: bool = False,
+) -> CertificateReport:
+    """The ``sampled`` tier alone, for a discrete update gain ``K``.
+
+    Parameters
+    ----------
+    params : BoucWenParams
+    K : sequence of 3 floats
+        Discrete update gain of the predict/update observer.
+    udot_max : float
+        Bound on ``|u'|`` (V/s); per sample ``|du| <= udot_max dt``.
+    dt : float
+        Sample time (s).
+    decay : float
+        Required decay rate (1/s).
+
+    Returns
+    -------
+    CertificateReport
+        With ``gains = None`` and one certificate, ``sampled``.
+    """
+    require_bounded(params, allow_unbounded)
+    udot_max = _rate(udot_max, "udot_max (V/s)", positive=True)
+    decay = _rate(decay, "decay (1/s)", positive=False)
+    dt = _check_dt(dt)
+    Kv = np.asarray(_as_gains(K, "discrete gains K"))
+    cert = _sampled(params, Kv, udot_max, decay, dt)
+    return CertificateReport(
+        params=params,
+        gains=None,
+        udot_max=udot_max,
+        decay=decay,
+        dt=dt,
+        discrete_gains=(float(Kv[0]), float(Kv[1]), float(Kv[2])),
+        certificates=(cert,),
+    )

@@ -1,0 +1,7 @@
+"""Command line: ``bwdesign SUBCOMMAND`` (also ``python -m bwdesign``). Nothing imports this
+package.
+"""
+
+from .main import main
+
+__all__ = ["main"]

@@ -1,0 +1,87 @@
+"""Argument types and shared options of the command line."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import NoReturn
+
+from ..errors import BWDesignError
+
+EXIT_OK, EXIT_NO, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class UsageError(BWDesignError, ValueError):
+    """Bad command-line input."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the package's error convention: one ``error:`` line, exit 2."""
+
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(f"{self.prog}: {message}")
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}")
+    return value
+
+
+def nonneg_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not math.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    return value
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def gains_triple(text: str) -> tuple[float, float, float]:
+    """argparse type: ``l1,l2,l3``, three finite numbers."""
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(
+            f"expected three comma-separated gains l1,l2,l3, got {text!r}"
+        )
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"gains must be numbers, got {text!r}") from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"gains must be finite, got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def add_plant_args(p: argparse.ArgumentParser) -> None:
+    """``--plant`` and ``--allow-unbounded``, shared by every subcommand."""
+    p.add_argument(
+        "--plant",
+        required=True,
+        metavar="NAME_OR_TOML",
+        help="preset name (paper_experiment, ...) or a stage .toml file",
+    )
+    p.add_argument(
+        "--allow-unbounded",
+        action="store_true",
+        help="accept parameters outside the bounded Bouc-Wen class",
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON document on stdout")

@@ -1,0 +1,120 @@
+"""Command line: ``bwdesign SUBCOMMAND`` (also ``python -m bwdesign``).
+
+Exit codes: 0 success; 1 a well-formed "no" (nothing certified, synthesis
+infeasible); 2 bad input, reported as one ``error:`` line on stderr with no
+traceback and nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from .._version import __version__
+from ..errors import BWDesignError
+from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK, _Parser, add_plant_args
+from .params import _cmd_params
+
+# -- registry ----------------------------------------------------------------
+
+Command = tuple[
+    str, str, Callable[[argparse.ArgumentParser], None], Callable[[argparse.Namespace], int]
+]
+
+
+def _params_args(p: argparse.ArgumentParser) -> None:
+    add_plant_args(p)
+
+
+def _lazy(module: str, name: str) -> Callable[..., Any]:
+    """A command hook imported on first use (keeps ``bwdesign --help`` light)."""
+
+    def call(*args: Any) -> Any:
+        from importlib import import_module
+
+        return getattr(import_module(f"bwdesign.{module}"), name)(*args)
+
+    return call
+
+
+def _report_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", required=True, metavar="FILE.toml", help="stage configuration")
+    p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument(
+        "--allow-unbounded",
+        action="store_true",
+        help="accept parameters outside the bounded Bouc-Wen class",
+    )
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from ..model.config import load_config
+    from ..report.certified import write_report
+
+    outcome = write_report(
+        load_config(args.config), args.out, quiet=args.quiet, allow_unbounded=args.allow_unbounded
+    )
+    print(f"{outcome.out_dir}/report.md: {outcome.verdict}")
+    return EXIT_OK if outcome.certified else EXIT_NO
+
+
+COMMANDS: list[Command] = [
+    ("params", "print a plant's parameters and bounded-class verdict", _params_args, _cmd_params),
+    (
+        "certify",
+        "check observer gains against an input-rate envelope (four certificate tiers)",
+        _lazy("cli.certify", "certify_args"),
+        _lazy("cli.certify", "run_certify"),
+    ),
+    (
+        "synthesize",
+        "find observer gains certified for an input-rate envelope (LMI synthesis)",
+        _lazy("cli.certify", "synthesize_args"),
+        _lazy("cli.certify", "run_synthesize"),
+    ),
+    (
+        "simulate",
+        "simulate the sampled tracking loop (observer + eq. 12) and report its error",
+        _lazy("cli.simulate", "simulate_args"),
+        _lazy("cli.simulate", "run_simulate"),
+    ),
+    (
+        "report",
+        "write the certified-gains report (Markdown, HTML, JSON, figures) for a stage config",
+        _report_args,
+        _cmd_report,
+    ),
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="bwdesign", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"bwdesign {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=_Parser)
+    sub.required = True
+    for name, help_text, add_args, run in COMMANDS:
+        p = sub.add_parser(name, help=help_text, description=help_text)
+        add_args(p)
+        p.set_defaults(_run=run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the exit code."""
+    try:
+        args = build_parser().parse_args(argv)
+        return args._run(args)
+    except BWDesignError as err:
+        print("error: " + " ".join(str(err).split()), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        # the reader went away (e.g. `bwdesign ... --json | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_NO
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return EXIT_BAD_INPUT

@@ -1,0 +1,46 @@
+"""``bwdesign params``."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..model.config import load_plant
+from ..model.summary import plant_summary
+from ..output.jsonenc import dump_json
+from .args import EXIT_OK
+
+
+def _cmd_params(args: argparse.Namespace) -> int:
+    params = load_plant(args.plant)
+    doc = plant_summary(params)
+    if args.json:
+        print(dump_json(doc))
+        return EXIT_OK
+    lu, iu = params.length_unit, params.input_unit
+    print(f"plant: {params.name or '(unnamed)'}")
+    if "note" in doc:
+        print(f"  {doc['note']}")
+    units = {
+        "a1": "1/s^2",
+        "a2": "1/s",
+        "a3": f"{lu}/({iu} s^2)",
+        "alpha": f"{lu}/{iu}",
+        "beta": f"1/{iu}",
+        "gamma": f"1/{iu}",
+    }
+    for k, unit in units.items():
+        print(f"  {k:<6} = {getattr(params, k):<14.8g} {unit}")
+    if params.physical is not None:
+        ph = params.physical
+        print("physical quantities:")
+        for k in ("m", "b", "k", "d", "alpha0"):
+            print(f"  {k:<6} = {getattr(ph, k):.8g}")
+    d = doc["derived"]
+    print("linear part:")
+    print(f"  natural frequency sqrt(a1)/(2 pi) = {d['natural_frequency_hz']:.6g} Hz")
+    print(f"  damping ratio a2/(2 sqrt(a1))     = {d['damping_ratio']:.4g}")
+    print(f"  static gain a3/a1                 = {d['static_gain']:.6g} {lu}/{iu}")
+    v = doc["bounded_class"]
+    print(f"bounded class: {'yes' if v['bounded'] else 'NO'}")
+    print(f"  {v['reason']}")
+    return EXIT_OK

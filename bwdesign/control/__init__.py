@@ -1,0 +1,42 @@
+"""Tracking control: the eq. 12 controllers, loop systems and loop analysis, mismatch sweeps and
+the digital tuning.
+"""
+
+from .analysis import LoopAnalysis, MismatchSweep, analyze_loop, mismatch_sweep, stability_interval
+from .controllers import (
+    ControlTerms,
+    DiscreteTrackingController,
+    TrackingController,
+    TuningWarning,
+    discrete_error_gains,
+    discrete_integral_gains,
+    eq12,
+    error_feedback_gains,
+    make_controller,
+    solve_jump,
+)
+from .systems import closed_loop_matrix, loop_systems
+from .tuning import DigitalTuning, digital_tuning, observer_gains
+
+__all__ = [
+    "TrackingController",
+    "DiscreteTrackingController",
+    "ControlTerms",
+    "TuningWarning",
+    "eq12",
+    "error_feedback_gains",
+    "discrete_error_gains",
+    "make_controller",
+    "solve_jump",
+    "discrete_integral_gains",
+    "loop_systems",
+    "closed_loop_matrix",
+    "LoopAnalysis",
+    "MismatchSweep",
+    "analyze_loop",
+    "mismatch_sweep",
+    "stability_interval",
+    "observer_gains",
+    "digital_tuning",
+    "DigitalTuning",
+]

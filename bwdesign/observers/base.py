@@ -1,0 +1,263 @@
+"""The base class of the sampled, filterpy-style observers."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..errors import GainError, InputError
+from ..model.params import BoucWenParams, require_bounded
+from ..model.plant import _check_dt, discretize, hysteresis_increment
+from .dynamics import observer_iosystem
+from .gains import C, _as_gains, check_gains, discrete_gains
+
+
+def _finite_scalar(v: Any, name: str) -> float:
+    """``v`` as a finite float; a size-1 array (filterpy's ``z`` of shape (1,)) is accepted."""
+    if isinstance(v, float | int) and not isinstance(v, bool):
+        f = float(v)
+    else:
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"{name} must be a number, got {v!r}") from None
+        if a.size != 1:
+            raise InputError(f"{name} must be a single number, got shape {a.shape}")
+        f = float(a.reshape(()))
+    if not math.isfinite(f):
+        raise InputError(f"{name} must be finite, got {f}")
+    return f
+
+
+def _measurements(zs: Any, n: int) -> list[float | None]:
+    """Validate a record of measurements (``None`` = missing) as python floats."""
+    if isinstance(zs, np.ndarray) and zs.dtype.kind in "fiu":
+        z = zs.reshape(-1) if zs.ndim == 2 and zs.shape[1:] == (1,) else zs
+        if z.ndim != 1 or z.size != n:
+            raise InputError(
+                f"zs must be 1-D (or (N, 1)) with one measurement per input, got shape "
+                f"{zs.shape} for {n} inputs"
+            )
+        if not np.all(np.isfinite(z)):
+            k = int(np.flatnonzero(~np.isfinite(z))[0])
+            raise InputError(
+                f"z must be finite, got zs[{k}] = {z[k]} (use None for a missing sample)"
+            )
+        return z.astype(float).tolist()
+    if len(zs) != n:
+        raise InputError(f"zs and us must have the same length, got {len(zs)} and {n}")
+    return [None if z is None else _finite_scalar(z, "z") for z in zs]
+
+
+def _inputs(us: Any) -> list[float]:
+    u = np.asarray(us, dtype=float)
+    if u.ndim != 1:
+        raise InputError(f"us must be a 1-D sequence of held inputs (V), got shape {u.shape}")
+    if not np.all(np.isfinite(u)):
+        k = int(np.flatnonzero(~np.isfinite(u))[0])
+        raise InputError(f"u must be finite, got us[{k}] = {u[k]}")
+    return u.tolist()
+
+
+class _SampledObserver:
+    """Shared machinery of the discrete observers (filterpy-style interface).
+
+    The step is computed on python floats with the scalar entries of the ZOH
+    matrices (one sample costs a few microseconds); :func:`phso_step` and
+    :func:`eso_step` are independent array twins of it, checked against it in
+    the tests.
+
+    Attributes
+    ----------
+    x : ndarray, shape (3,)
+        Current estimate (x1 displacement, x2 velocity, x3 hysteresis).
+    x_prior, x_post : ndarray, shape (3,)
+        Estimate after the last ``predict`` and after the last ``update``.
+    K : ndarray, shape (3,)
+        Discrete correction gains.
+    gains : ndarray, shape (3,) or None
+        Continuous gains the observer was built from (None if built from ``K``).
+    y : float
+        Last innovation ``z - x_prior[0]`` (0 for a skipped sample).
+    z : float or None
+        Last measurement.
+    u_prev : float
+        Input held over the previous sample (V).
+    """
+
+    _hysteresis = True
+    kind = ""
+
+    def __init__(
+        self,
+        params: BoucWenParams,
+        gains: Any = None,
+        dt: float = 2e-4,
+        *,
+        discrete: Any = None,
+        x0: Any = None,
+        u_prev: float = 0.0,
+        allow_unbounded: bool = False,
+    ) -> None:
+        require_bounded(params, allow_unbounded)
+        self.params = params
+        self.dt = _check_dt(dt)
+        self._zoh = discretize(params, self.dt)
+        F, g = self._zoh.F, self._zoh.g
+        # the two non-trivial rows of F and g (row 3 is x3+ = h, g3 = 0)
+        self._coef = (*F[0].tolist(), *F[1].tolist(), float(g[0]), float(g[1]))
+        if (gains is None) == (discrete is None):
+            raise GainError(
+                f"{type(self).__name__}: give either continuous gains (l1, l2, l3) or "
+                "discrete=K, exactly one of them"
+            )
+        if discrete is None:
+            self.gains = check_gains(params, gains)
+            self.K = discrete_gains(params, self.gains, self.dt)
+        else:
+            self.gains = None
+            self.K = _as_gains(discrete, "discrete gains K")
+            rho = np.abs(np.linalg.eigvals(self._zoh.F - np.outer(self.K, C @ self._zoh.F)))
+            if rho.max() >= 1.0:
+                raise GainError(
+                    f"discrete gains K = {self.K.tolist()} leave the nominal error dynamics "
+                    f"unstable (spectral radius {rho.max():.6g} >= 1)"
+                )
+        self.reset(x0, u_prev=u_prev)
+
+    def reset(self, x0: Any = None, *, u_prev: float = 0.0) -> None:
+        """Restart from ``x0`` (default zeros) with ``u_prev`` (V) held before the first sample."""
+        x = np.zeros(3) if x0 is None else np.array(x0, dtype=float)
+        if x.shape != (3,) or not np.all(np.isfinite(x)):
+            raise InputError(f"x0 must be a finite vector of shape (3,), got {x0!r}")
+        self.x = x
+        self.x_prior = x.copy()
+        self.x_post = x.copy()
+        self.u_prev = _finite_scalar(u_prev, "u_prev")
+        self.y = 0.0
+        self.z: float | None = None
+
+    def predict(self, u: float) -> None:
+        """Carry the estimate from ``t_k`` to ``t_{k+1}`` with ``u`` (V) held.
+
+        For the PHSO the hysteresis copy first follows the jump ``u_prev -> u``
+        in closed form; then the linear part is propagated exactly (ZOH).
+        """
+        u = _finite_scalar(u, "u")
+        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        if self._hysteresis:
+            x3 = hysteresis_increment(self.params, x3, self.u_prev, u)
+        f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
+        prior = (
+            f11 * x1 + f12 * x2 + f13 * x3 + g1 * u,
+            f21 * x1 + f22 * x2 + f23 * x3 + g2 * u,
+            x3,
+        )
+        self.x = np.array(prior)
+        self.x_prior = np.array(prior)
+        self.u_prev = u
+
+    def update(self, z: float | None) -> None:
+        """Correct with the measured displacement ``z = y(t_{k+1})``; ``None`` skips.
+
+        Parameters
+        ----------
+        z : float, array of size 1, or None
+            Measured displacement (length unit).
+        """
+        if z is None:
+            self.z = None
+            self.y = 0.0
+            self.x_post = np.array(self.x, dtype=float)
+            return
+        z = _finite_scalar(z, "z")
+        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        k1, k2, k3 = self.K.tolist()
+        r = z - x1
+        post = (x1 + k1 * r, x2 + k2 * r, x3 + k3 * r)
+        self.z = z
+        self.y = r
+        self.x = np.array(post)
+        self.x_post = np.array(post)
+
+    def batch_filter(self, zs: Any, us: Any) -> np.ndarray:
+        """Run ``predict(us[k])``, ``update(zs[k])`` over a record.
+
+        Gives the same numbers as the loop (the same float operations in the
+        same order) without its per-call overhead.
+
+        Parameters
+        ----------
+        zs : sequence of float or None, length N
+            ``zs[k] = y(t_{k+1})`` (length unit); ``None`` marks a missing sample.
+        us : array_like, shape (N,)
+            Held inputs (V).
+
+        Returns
+        -------
+        ndarray, shape (N, 3)
+            The posterior estimates at ``t_1 .. t_N``.
+        """
+        ul = _inputs(us)
+        zl = _measurements(zs, len(ul))
+        if not ul:
+            return np.empty((0, 3))
+        f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
+        k1, k2, k3 = self.K.tolist()
+        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        up = self.u_prev
+        params, hyst = self.params, self._hysteresis
+        out = []
+        append = out.append
+        for uk, zk in zip(ul, zl, strict=True):
+            if hyst:
+                x3 = hysteresis_increment(params, x3, up, uk)
+            x1, x2 = (
+                f11 * x1 + f12 * x2 + f13 * x3 + g1 * uk,
+                f21 * x1 + f22 * x2 + f23 * x3 + g2 * uk,
+            )
+            prior = (x1, x2, x3)
+            if zk is not None:
+                r = zk - x1
+                x1, x2, x3 = x1 + k1 * r, x2 + k2 * r, x3 + k3 * r
+            append((x1, x2, x3))
+            up = uk
+        res = np.array(out)
+        self.x_prior = np.array(prior)
+        self.y = 0.0 if zl[-1] is None else zl[-1] - prior[0]
+        self.x, self.x_post, self.u_prev, self.z = res[-1].copy(), res[-1].copy(), up, zl[-1]
+        return res
+
+    def as_iosystem(self, name: str | None = None):
+        """The continuous form of this observer as a python-control ``NonlinearIOSystem``.
+
+        See :func:`observer_iosystem` (inputs ``u``, ``udot``, ``y``; states and
+        outputs ``xhat[0..2]``).
+
+        Raises
+        ------
+        GainError
+            The observer was built from discrete gains ``K``, which do not
+            define a continuous observer.
+        """
+        if self.gains is None:
+            raise GainError(
+                f"{type(self).__name__} was built from discrete gains K; the continuous "
+                "form needs continuous gains (l1, l2, l3): build it with gains=..."
+            )
+        return observer_iosystem(
+            self.params, self.gains, kind=self.kind, name=name, allow_unbounded=True
+        )
+
+    def __repr__(self) -> str:
+        g = (
+            f"gains={self.gains.tolist()}"
+            if self.gains is not None
+            else f"discrete={self.K.tolist()}"
+        )
+        return (
+            f"{type(self).__name__}(plant={self.params.name or 'unnamed'!r}, {g}, "
+            f"dt={self.dt:g}, x={np.array2string(np.asarray(self.x), precision=6)})"
+        )

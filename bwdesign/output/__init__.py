@@ -1,0 +1,3 @@
+"""Output layer: strict JSON encoding (and, below every writer, file output)."""
+
+__all__ = []

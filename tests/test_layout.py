@@ -1,0 +1,175 @@
+"""The package layout stays true: one direction of imports, heavy libraries in one place each.
+
+Parses every module's imports with ``ast`` (imports inside functions count)
+and checks the rules the README's "Layout" section states.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "bwdesign"
+
+#: Layers, lowest first: a layer imports only from layers below it (or itself).
+#: ``errors``, ``_version``, ``output`` and ``plotting`` import nothing above them;
+#: ``plotting`` imports nothing from bwdesign at all, so any layer may call it.
+LAYERS = (
+    ("errors", "_version"),
+    ("output", "plotting"),
+    ("model",),
+    ("observers",),
+    ("control",),
+    ("certify",),
+    ("sim",),
+    ("report",),
+    ("cli",),
+)
+RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
+#: Third-party packages allowed in one subpackage (or module) only.
+CONFINED = {"cvxpy": "bwdesign.certify.lmi", "matplotlib": "bwdesign.plotting"}
+#: The API facade and the entry point may import anything.
+FACADES = {"bwdesign", "bwdesign.__main__"}
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _imports(path: Path, modules: set[str]) -> list[str]:
+    """Absolute names of every module imported by ``path`` (function bodies included).
+
+    ``from pkg import mod`` counts as an import of ``pkg.mod`` only (``pkg`` is
+    then already being imported), ``from pkg import name`` as one of ``pkg``.
+    """
+    mod = _module_name(path)
+    package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            subs = [f"{target}.{a.name}" for a in node.names]
+            out += subs if all(s in modules for s in subs) else [target]
+    return out
+
+
+def _graph() -> dict[str, set[str]]:
+    files = {_module_name(p): p for p in PKG.rglob("*.py")}
+    graph: dict[str, set[str]] = defaultdict(set)
+    for mod, path in files.items():
+        graph[mod]
+        for target in _imports(path, set(files)):
+            if target in files and target != mod:
+                graph[mod].add(target)
+            elif target.split(".")[0] != "bwdesign":
+                graph[mod].add("!" + target.split(".")[0])
+    return graph
+
+
+def _layer(mod: str) -> str | None:
+    parts = mod.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+GRAPH = _graph()
+
+
+def test_every_subpackage_has_a_layer():
+    layers = {_layer(m) for m in GRAPH} - {None, "__main__"}
+    assert layers <= set(RANK), f"add {sorted(layers - set(RANK))} to LAYERS"
+
+
+def _upward(mod: str, targets: set[str]) -> list[str]:
+    """The imports of ``mod`` that go up the layers (or into the facade)."""
+    if mod in FACADES:
+        return []
+    return sorted(
+        t
+        for t in targets
+        if not t.startswith("!") and (t in FACADES or RANK[_layer(t)] > RANK[_layer(mod)])
+    )
+
+
+def _find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m: str) -> list[str] | None:
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(graph.get(m, ())):
+            if state.get(t) == 1:
+                return stack[stack.index(t) :] + [t]
+            if t not in state and (found := visit(t)):
+                return found
+        stack.pop()
+        state[m] = 2
+        return None
+
+    for m in sorted(graph):
+        if m not in state and (found := visit(m)):
+            return found
+    return None
+
+
+@pytest.mark.parametrize("mod", sorted(GRAPH))
+def test_imports_go_down_the_layers(mod):
+    bad = _upward(mod, GRAPH[mod])
+    assert not bad, f"{mod} imports {bad}: against the direction of the layers"
+
+
+def test_plotting_imports_nothing_from_bwdesign():
+    for mod, targets in GRAPH.items():
+        if _layer(mod) == "plotting":
+            inner = [t for t in targets if not t.startswith("!") and _layer(t) != "plotting"]
+            assert not inner, f"{mod} imports {inner}"
+
+
+@pytest.mark.parametrize("library", sorted(CONFINED))
+def test_heavy_libraries_are_confined(library):
+    home = CONFINED[library]
+    users = [m for m, t in GRAPH.items() if "!" + library in t]
+    assert users, f"nothing imports {library}: is the rule stale?"
+    outside = [m for m in users if m != home and not m.startswith(home + ".")]
+    assert not outside, f"{library} imported outside {home}: {outside}"
+
+
+def test_no_import_cycle():
+    graph = {m: {t for t in ts if not t.startswith("!")} for m, ts in GRAPH.items()}
+    cycle = _find_cycle(graph)
+    assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+def test_modules_stay_small():
+    big = {
+        str(p.relative_to(PKG)): n
+        for p in PKG.rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > 900
+    }
+    assert not big, f"split along their concerns: {big}"
+
+
+def test_the_checks_can_fail():
+    """The rules catch what they are for: an upward import, a cycle, a function-level import."""
+    assert _upward("bwdesign.model.params", {"bwdesign.cli.main"}) == ["bwdesign.cli.main"]
+    assert _upward("bwdesign.sim.result", {"bwdesign.report.certified"})
+    assert _upward("bwdesign.sim.result", {"bwdesign"}) == ["bwdesign"]
+    assert not _upward("bwdesign.report.certified", {"bwdesign.sim.result", "!numpy"})
+    assert _find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+    # write_report imports the figures inside a function: the graph sees it
+    assert "bwdesign.plotting.figures" in GRAPH["bwdesign.report.certified"]
