@@ -88,6 +88,18 @@ COMMANDS: list[Command] = [
         _report_args,
         _cmd_report,
     ),
+    (
+        "init",
+        "write a commented starter stage config (every section and key, units and defaults)",
+        _lazy("cli.init", "init_args"),
+        _lazy("cli.init", "run_init"),
+    ),
+    (
+        "presets",
+        "list the bundled stage configs (for --config NAME and init --preset NAME)",
+        _lazy("cli.init", "presets_args"),
+        _lazy("cli.init", "run_presets"),
+    ),
 ]
 
 
