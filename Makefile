@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report reports paper lint bench
+.PHONY: install test report reports paper lint bench dist
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -41,3 +41,9 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
 	$(BIN)/python benchmarks/bench_certify.py
+
+# the sdist and the wheel (the wheel built from the sdist) into dist/, checked as an index would
+dist: $(STAMP)
+	rm -rf dist
+	$(BIN)/python -m build --outdir dist .
+	$(BIN)/twine check --strict dist/*

@@ -75,9 +75,13 @@ _SPEC: dict[str, list[tuple[str, str, str | None]]] = {
         ("offset", "um: mean position (step: the start)", "0.0"),
         ("frequency", "Hz: sine and triangle, > 0", None),
         ("phase", "rad: sine and triangle", "0.0"),
-        ("corner_time", "s: triangle only, parabolic corner blends (0: sharp)", "0.0"),
+        (
+            "corner_time",
+            "s: triangle only, length of the parabolic corner blends, 0 = sharp",
+            "0.0",
+        ),
         ("t_step", "s: step only, time of the step", "0.0"),
-        ("rise_time", "s: step only, quintic rise (0: sharp)", "0.0"),
+        ("rise_time", "s: step only, length of the quintic rise, 0 = sharp", "0.0"),
     ],
     "synthesis": [
         ("decay", "1/s: decay rate asked of the synthesised gains", "100.0"),
@@ -162,7 +166,8 @@ def _reference(table: dict[str, Any]) -> list[str]:
     spec = [s for s in _SPEC["reference"] if s[0] in keys]
     lines = _entries(table, spec, active=True)
     others = [s for s in _SPEC["reference"] if s[0] not in keys]
-    lines.append(f"# read only for other kinds: {', '.join(k for k, _, _ in others)}")
+    lines.append("# keys of the other kinds:")
+    lines += [f"#   {k}: {c}" + ("" if d is None else f" (default {d})") for k, c, d in others]
     return lines
 
 
