@@ -16,8 +16,9 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
+# PYTEST_ARGS: extra pytest options (.ci/run passes -m '' and --durations)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
 # the main job: the certified-gains report for the default stage
 report: $(STAMP)
