@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import tempfile
 import textwrap
@@ -22,7 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from .._version import __version__
+from ..certify.synthesis import default_pole_radius
 from ..errors import ConfigError
+from ..model.params import BoucWenParams
 from ..model.stage_presets import stage_preset_path, stage_presets
 from ..output.jsonenc import dump_json
 from .args import EXIT_OK
@@ -172,12 +173,9 @@ def _reference(table: dict[str, Any]) -> list[str]:
 
 
 def _synthesis_default(data: dict[str, Any]) -> str:
-    """The default pole radius for this stage, min(10 sqrt(a1), 1/dt) (rad/s), as text."""
-    plant = data["plant"]
-    a1 = plant["a1"] if "a1" in plant else plant["k"] / plant["m"]
-    radius = 10 * math.sqrt(a1)
-    if "dt" in data.get("sampling", {}):
-        radius = min(radius, 1 / data["sampling"]["dt"])
+    """The default pole radius (rad/s) for this stage, as text."""
+    plant = BoucWenParams.from_dict(data["plant"])
+    radius = default_pole_radius(plant, data.get("sampling", {}).get("dt"))
     return f"default min(10 sqrt(a1), 1/dt) = {radius:.6g} here"
 
 

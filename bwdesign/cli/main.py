@@ -41,7 +41,12 @@ def _lazy(module: str, name: str) -> Callable[..., Any]:
 
 
 def _report_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", required=True, metavar="FILE.toml", help="stage configuration")
+    p.add_argument(
+        "--config",
+        required=True,
+        metavar="FILE.toml",
+        help="stage configuration file, or a bundled preset's name (see bwdesign presets)",
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
