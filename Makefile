@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report reports paper lint bench
+.PHONY: install test report reports paper lint bench dist
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -16,8 +16,9 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
+# PYTEST_ARGS: extra pytest options (.ci/run passes -m '' and --durations)
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
 # the main job: the certified-gains report for the default stage
 report: $(STAMP)
@@ -41,3 +42,9 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
 	$(BIN)/python benchmarks/bench_certify.py
+
+# the sdist and the wheel (the wheel built from the sdist) into dist/, checked as an index would
+dist: $(STAMP)
+	rm -rf dist
+	$(BIN)/python -m build --outdir dist .
+	$(BIN)/twine check --strict dist/*

@@ -17,6 +17,7 @@ from .errors import (
     ConfigError,
     GainError,
     InputError,
+    MissingExtraError,
     ParameterError,
     SolverError,
     UnboundedModelError,
@@ -26,6 +27,7 @@ from .model.envelope import Envelope, derive_envelope, given_envelope
 from .model.params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
 from .model.plant import hysteresis_increment, simulate_zoh, zoh_step
 from .model.references import Sine, Step, Triangle
+from .model.stage_presets import stage_presets
 from .observers.sampled import ExtendedStateObserver, HysteresisObserver
 from .observers.ukf import UnscentedObserver
 from .sim.closed_loop import simulate
@@ -42,6 +44,7 @@ __all__ = [
     "preset",
     "load_plant",
     "load_config",
+    "stage_presets",
     "StageConfig",
     "ControllerSettings",
     "Envelope",
@@ -77,6 +80,7 @@ __all__ = [
     "GainError",
     "InputError",
     "SolverError",
+    "MissingExtraError",
     "certify",
     "certify_discrete",
     "synthesize",

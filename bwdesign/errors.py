@@ -15,6 +15,7 @@ __all__ = [
     "GainError",
     "InputError",
     "SolverError",
+    "MissingExtraError",
 ]
 
 
@@ -58,3 +59,23 @@ class InputError(BWDesignError, ValueError):
 
 class SolverError(BWDesignError, RuntimeError):
     """A convex solver failed; the result is *not* a certificate."""
+
+
+class MissingExtraError(BWDesignError, ImportError):
+    """An optional dependency is not installed; the message names the extra to install.
+
+    Subclasses :class:`ImportError` (what the failed import was), so code that
+    guards an optional import with ``except ImportError`` keeps working.
+
+    Attributes
+    ----------
+    extra : str
+        The extra that installs it: ``pip install 'bwdesign[extra]'``.
+    module : str
+        The module that could not be imported.
+    """
+
+    def __init__(self, message: str, *, extra: str, module: str):
+        super().__init__(message, name=module)
+        self.extra = extra
+        self.module = module

@@ -18,7 +18,7 @@ PKG = Path(__file__).resolve().parents[1] / "bwdesign"
 #: ``errors``, ``_version``, ``output`` and ``plotting`` import nothing above them;
 #: ``plotting`` imports nothing from bwdesign at all, so any layer may call it.
 LAYERS = (
-    ("errors", "_version"),
+    ("errors", "_version", "extras"),
     ("output", "plotting"),
     ("model",),
     ("observers",),

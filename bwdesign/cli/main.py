@@ -41,7 +41,12 @@ def _lazy(module: str, name: str) -> Callable[..., Any]:
 
 
 def _report_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--config", required=True, metavar="FILE.toml", help="stage configuration")
+    p.add_argument(
+        "--config",
+        required=True,
+        metavar="FILE.toml",
+        help="stage configuration file, or a bundled preset's name (see bwdesign presets)",
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced)")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
@@ -87,6 +92,18 @@ COMMANDS: list[Command] = [
         "write the certified-gains report (Markdown, HTML, JSON, figures) for a stage config",
         _report_args,
         _cmd_report,
+    ),
+    (
+        "init",
+        "write a commented starter stage config (every section and key, units and defaults)",
+        _lazy("cli.init", "init_args"),
+        _lazy("cli.init", "run_init"),
+    ),
+    (
+        "presets",
+        "list the bundled stage configs (for --config NAME and init --preset NAME)",
+        _lazy("cli.init", "presets_args"),
+        _lazy("cli.init", "run_presets"),
     ),
 ]
 

@@ -27,6 +27,7 @@ from ..errors import BWDesignError, ConfigError, ParameterError
 from .envelope import Envelope, derive_envelope, given_envelope
 from .params import PRESETS, BoucWenParams, preset
 from .references import Reference, reference_from_dict
+from .stage_presets import resolve_config, stage_presets
 
 __all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant"]
 
@@ -225,12 +226,15 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
 def load_config(path: str | Path) -> StageConfig:
     """Read and validate a stage configuration file.
 
+    ``path`` may also name a bundled stage configuration (``paper_experiment``,
+    see :func:`bwdesign.stage_presets`); a path that exists wins.
+
     Raises
     ------
     ConfigError
         Missing file, malformed TOML, unknown sections or keys, wrong types.
     """
-    path = Path(path)
+    path = resolve_config(path)
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -251,8 +255,9 @@ def load_plant(name_or_path: str | Path) -> BoucWenParams:
     """A plant by preset name (``paper_experiment``, ...) or from a TOML file.
 
     A string that is a preset name gives the preset; anything else is read as a
-    configuration file and its ``[plant]`` section returned (the whole file is
-    validated).
+    configuration file (or a bundled stage configuration by name, see
+    :func:`bwdesign.stage_presets`) and its ``[plant]`` section returned (the
+    whole file is validated).
 
     Examples
     --------
@@ -262,6 +267,6 @@ def load_plant(name_or_path: str | Path) -> BoucWenParams:
     if isinstance(name_or_path, str) and name_or_path in PRESETS:
         return preset(name_or_path)
     p = Path(name_or_path)
-    if p.suffix.lower() != ".toml" and not p.exists():
+    if p.suffix.lower() != ".toml" and not p.exists() and str(p) not in stage_presets():
         return preset(str(name_or_path))  # raises the "unknown preset" error
     return load_config(p).plant
