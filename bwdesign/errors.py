@@ -15,6 +15,7 @@ __all__ = [
     "GainError",
     "InputError",
     "SolverError",
+    "NotCertifiedError",
 ]
 
 
@@ -58,3 +59,11 @@ class InputError(BWDesignError, ValueError):
 
 class SolverError(BWDesignError, RuntimeError):
     """A convex solver failed; the result is *not* a certificate."""
+
+
+class NotCertifiedError(BWDesignError, RuntimeError):
+    """A well-formed "no": nothing certifies what was asked for (exit 1 on the command line).
+
+    Raised where going on would hand out an uncertified result, e.g. exporting
+    firmware for gains that no certificate tier holds for.
+    """

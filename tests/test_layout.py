@@ -24,6 +24,7 @@ LAYERS = (
     ("observers",),
     ("control",),
     ("certify",),
+    ("codegen",),
     ("sim",),
     ("report",),
     ("cli",),
@@ -31,6 +32,8 @@ LAYERS = (
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 #: Third-party packages allowed in one subpackage (or module) only.
 CONFINED = {"cvxpy": "bwdesign.certify.lmi", "matplotlib": "bwdesign.plotting"}
+#: The C templates are read only by code generation.
+TEMPLATES_HOME = "bwdesign.codegen"
 #: The API facade and the entry point may import anything.
 FACADES = {"bwdesign", "bwdesign.__main__"}
 
