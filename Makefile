@@ -41,3 +41,4 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
 	$(BIN)/python benchmarks/bench_certify.py
+	$(BIN)/python benchmarks/bench_codegen.py

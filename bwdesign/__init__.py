@@ -9,6 +9,7 @@ from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hyste
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
 from .certify.synthesis import synthesize
 from .certify.tiers import certify, certify_discrete
+from .codegen.export import CExport, export_c
 from .control.analysis import LoopAnalysis, analyze_loop, mismatch_sweep
 from .control.controllers import DiscreteTrackingController, TrackingController, TuningWarning
 from .control.tuning import DigitalTuning, digital_tuning
@@ -17,6 +18,7 @@ from .errors import (
     ConfigError,
     GainError,
     InputError,
+    NotCertifiedError,
     ParameterError,
     SolverError,
     UnboundedModelError,
@@ -77,6 +79,9 @@ __all__ = [
     "GainError",
     "InputError",
     "SolverError",
+    "NotCertifiedError",
+    "export_c",
+    "CExport",
     "certify",
     "certify_discrete",
     "synthesize",

@@ -157,6 +157,16 @@ def test_no_import_cycle():
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
 
 
+def test_c_templates_are_read_only_by_codegen():
+    readers = [
+        _module_name(p)
+        for p in PKG.rglob("*.py")
+        if ".tmpl" in p.read_text() and not _module_name(p).startswith(TEMPLATES_HOME)
+    ]
+    assert not readers, f"C templates used outside {TEMPLATES_HOME}: {readers}"
+    assert list((PKG / "codegen" / "templates").glob("*.tmpl")), "no templates: is the rule stale?"
+
+
 def test_modules_stay_small():
     big = {
         str(p.relative_to(PKG)): n
