@@ -237,6 +237,17 @@ def test_float32_code_has_no_double(tmp_path, config):
     assert consts and all(c.endswith("f") for c in consts)
 
 
+def test_synthesized_gains(tmp_path, config):
+    """--synthesize exports the gains bwdesign report synthesises, certified at the envelope."""
+    from bwdesign import synthesize
+
+    res = export_c(config, tmp_path, gains_from="synthesize")
+    syn = synthesize(config.plant, udot_max=config.envelope().udot_max, decay=100.0, dt=config.dt)
+    assert res.certified and syn.feasible
+    assert res.document["observers"]["phso"]["K"] == pytest.approx(list(syn.discrete_gains))
+    assert "observer gains from synthesize" in (tmp_path / "bw.h").read_text()
+
+
 def test_uncertified_gains_are_refused(tmp_path, config):
     # the paper's gains at 1e5 V/s, 25x what any tier certifies for them
     bad = replace(config, envelope_spec={"udot_max": 1e5})

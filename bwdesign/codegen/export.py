@@ -190,6 +190,12 @@ def _comment(summary: dict[str, Any], gains, K: dict[str, list[float]], params) 
     def num(v):
         return "-" if v is None else f"{v:.10g}"
 
+    top = summary["max_udot"]
+    reach = (
+        "the tier holds for every rate up to its search limit"
+        if top is not None and not math.isfinite(top)
+        else f"the tier holds up to {num(top)} V/s"
+    )
     lines = [
         f"stage {params.name or '(unnamed)'}: config {summary['config'] or '-'}, "
         f"sha256 {summary['config_sha256'] or '-'}",
@@ -202,8 +208,8 @@ def _comment(summary: dict[str, Any], gains, K: dict[str, list[float]], params) 
     if summary["certified"]:
         lines += [
             f"CERTIFIED by the {summary['tier']} tier for |u'| <= {num(summary['udot_max'])} V/s "
-            f"at dt = {num(summary['dt'])} s (the tier holds up to {num(summary['max_udot'])} "
-            f"V/s), certified decay {num(summary['decay_rate'])} 1/s.",
+            f"at dt = {num(summary['dt'])} s ({reach}), certified decay "
+            f"{num(summary['decay_rate'])} 1/s.",
         ]
     else:
         lines += [
