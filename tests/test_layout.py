@@ -31,7 +31,12 @@ LAYERS = (
 )
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 #: Third-party packages allowed in one subpackage (or module) only.
-CONFINED = {"cvxpy": "bwdesign.certify.lmi", "matplotlib": "bwdesign.plotting"}
+CONFINED = {
+    "cvxpy": "bwdesign.certify.lmi",
+    "matplotlib": "bwdesign.plotting",
+    "dask": "bwdesign.sim.sweep",
+    "distributed": "bwdesign.sim.sweep",
+}
 #: The C templates are read only by code generation.
 TEMPLATES_HOME = "bwdesign.codegen"
 #: The API facade and the entry point may import anything.

@@ -89,6 +89,12 @@ COMMANDS: list[Command] = [
         _lazy("cli.export_c", "run_export_c"),
     ),
     (
+        "sweep",
+        "Monte Carlo sweep of the sampled tracking loop over an uncertainty box (Dask)",
+        _lazy("cli.sweep", "sweep_args"),
+        _lazy("cli.sweep", "run_sweep_command"),
+    ),
+    (
         "report",
         "write the certified-gains report (Markdown, HTML, JSON, figures) for a stage config",
         _report_args,
