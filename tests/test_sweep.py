@@ -42,6 +42,19 @@ def _mismatched(n, seed):
     return [replace(P, **{k: float(cols[k][i]) for k in BOX}) for i in range(n)], cols
 
 
+def test_stacked_zoh_matches_discretize():
+    from bwdesign.model.plant import discretize
+    from bwdesign.sim.batch import _true_matrices
+
+    tps = [P, preset("paper_simulation_corrected"), replace(P, a1=1e9, a2=10.0), replace(P, a2=5e4)]
+    T = _true_matrices(tps, DT)
+    for i, tp in enumerate(tps):
+        z = discretize(tp, DT)
+        got = [[T[f"p{r + 1}{c + 1}"][i] for c in range(3)] for r in range(2)]
+        np.testing.assert_allclose(got, z.F[:2], rtol=1e-12, atol=1e-14 * np.abs(z.F[:2]).max())
+        np.testing.assert_allclose([T["g1"][i], T["g2"][i]], z.g[:2], rtol=1e-12)
+
+
 def test_hysteresis_batch_matches_scalar():
     rng = np.random.default_rng(0)
     for p in (P, preset("paper_simulation_corrected"), replace(P, gamma=-0.3)):
