@@ -42,6 +42,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
 	$(BIN)/python benchmarks/bench_certify.py
+	$(BIN)/python benchmarks/bench_codegen.py
 
 # the sdist and the wheel (the wheel built from the sdist) into dist/, checked as an index would
 dist: $(STAMP)

@@ -9,6 +9,7 @@ from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hyste
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
 from .certify.synthesis import synthesize
 from .certify.tiers import certify, certify_discrete
+from .codegen.export import CExport, export_c
 from .control.analysis import LoopAnalysis, analyze_loop, mismatch_sweep
 from .control.controllers import DiscreteTrackingController, TrackingController, TuningWarning
 from .control.tuning import DigitalTuning, digital_tuning
@@ -18,6 +19,7 @@ from .errors import (
     GainError,
     InputError,
     MissingExtraError,
+    NotCertifiedError,
     ParameterError,
     SolverError,
     UnboundedModelError,
@@ -81,6 +83,9 @@ __all__ = [
     "InputError",
     "SolverError",
     "MissingExtraError",
+    "NotCertifiedError",
+    "export_c",
+    "CExport",
     "certify",
     "certify_discrete",
     "synthesize",

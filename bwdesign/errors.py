@@ -16,6 +16,7 @@ __all__ = [
     "InputError",
     "SolverError",
     "MissingExtraError",
+    "NotCertifiedError",
 ]
 
 
@@ -79,3 +80,11 @@ class MissingExtraError(BWDesignError, ImportError):
         super().__init__(message, name=module)
         self.extra = extra
         self.module = module
+
+
+class NotCertifiedError(BWDesignError, RuntimeError):
+    """A well-formed "no": nothing certifies what was asked for (exit 1 on the command line).
+
+    Raised where going on would hand out an uncertified result, e.g. exporting
+    firmware for gains that no certificate tier holds for.
+    """

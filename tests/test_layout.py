@@ -24,13 +24,20 @@ LAYERS = (
     ("observers",),
     ("control",),
     ("certify",),
+    ("codegen",),
     ("sim",),
     ("report",),
     ("cli",),
 )
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 #: Third-party packages allowed in one subpackage (or module) only.
-CONFINED = {"cvxpy": "bwdesign.certify.lmi", "matplotlib": "bwdesign.plotting"}
+CONFINED = {
+    "cvxpy": "bwdesign.certify.lmi",
+    "matplotlib": "bwdesign.plotting",
+    "dask": "bwdesign.sim.sweep",
+}
+#: The C templates are read only by code generation.
+TEMPLATES_HOME = "bwdesign.codegen"
 #: The API facade and the entry point may import anything.
 FACADES = {"bwdesign", "bwdesign.__main__"}
 
@@ -152,6 +159,16 @@ def test_no_import_cycle():
     graph = {m: {t for t in ts if not t.startswith("!")} for m, ts in GRAPH.items()}
     cycle = _find_cycle(graph)
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
+
+
+def test_c_templates_are_read_only_by_codegen():
+    readers = [
+        _module_name(p)
+        for p in PKG.rglob("*.py")
+        if ".tmpl" in p.read_text() and not _module_name(p).startswith(TEMPLATES_HOME)
+    ]
+    assert not readers, f"C templates used outside {TEMPLATES_HOME}: {readers}"
+    assert list((PKG / "codegen" / "templates").glob("*.tmpl")), "no templates: is the rule stale?"
 
 
 def test_modules_stay_small():

@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from .._version import __version__
-from ..errors import BWDesignError
+from ..errors import BWDesignError, NotCertifiedError
 from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK, _Parser, add_plant_args
 from .params import _cmd_params
 
@@ -88,6 +88,18 @@ COMMANDS: list[Command] = [
         _lazy("cli.simulate", "run_simulate"),
     ),
     (
+        "export-c",
+        "export the certified discrete observers and controller as dependency-free C99",
+        _lazy("cli.export_c", "export_c_args"),
+        _lazy("cli.export_c", "run_export_c"),
+    ),
+    (
+        "sweep",
+        "Monte Carlo sweep of the sampled tracking loop over an uncertainty box (Dask)",
+        _lazy("cli.sweep", "sweep_args"),
+        _lazy("cli.sweep", "run_sweep_command"),
+    ),
+    (
         "report",
         "write the certified-gains report (Markdown, HTML, JSON, figures) for a stage config",
         _report_args,
@@ -125,6 +137,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = build_parser().parse_args(argv)
         return args._run(args)
+    except NotCertifiedError as err:
+        print("not certified: " + " ".join(str(err).split()), file=sys.stderr)
+        return EXIT_NO
     except BWDesignError as err:
         print("error: " + " ".join(str(err).split()), file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -1,0 +1,154 @@
+"""ns per step of the exported C observers and controller beside the Python step.
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_codegen.py [--steps 10000000] [--json FILE]
+
+Exports ``configs/paper_experiment.toml`` in float32 and float64
+(:func:`bwdesign.codegen.export_c`), builds ``benchmarks/bench_step.c`` against it
+with ``cc -O2`` and times 1e7 steps of the PHSO, the ESO and the discrete
+controller; then times the Python ``HysteresisObserver.predict + update`` and
+``batch_filter`` per step in the same process. Target: <= 50 ns for the PHSO step.
+Also prints the agreement of the exported PHSO with Python on a 1e5-step sine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bwdesign import HysteresisObserver, load_config, simulate_zoh
+from bwdesign.codegen import export_c
+
+ROOT = Path(__file__).resolve().parents[1]
+TARGET_NS = 50.0
+
+
+def c_times(cfg, precision: str, steps: int, work: Path) -> tuple[list[float], float]:
+    d = work / precision
+    export_c(cfg, d, precision=precision)
+    shutil.copy(ROOT / "benchmarks" / "bench_step.c", d)
+    cc = shutil.which("cc") or "gcc"
+    subprocess.run(
+        [
+            cc,
+            "-std=c99",
+            "-O2",
+            f"-I{d}",
+            str(d / "bench_step.c"),
+            str(d / "bw.c"),
+            "-lm",
+            "-o",
+            str(d / "bench"),
+        ],
+        check=True,
+    )
+    subprocess.run(
+        [
+            cc,
+            "-std=c99",
+            "-O2",
+            str(d / "harness.c"),
+            str(d / "bw.c"),
+            "-lm",
+            "-o",
+            str(d / "harness"),
+        ],
+        check=True,
+    )
+    runs = [
+        [
+            float(v)
+            for v in subprocess.run(
+                [str(d / "bench"), str(steps)], capture_output=True, text=True, check=True
+            ).stdout.split()
+        ]
+        for _ in range(3)
+    ]
+    best = [min(r[i] for r in runs) for i in range(3)]
+    # agreement with Python on a 1e5-step sine with 10 nm noise
+    p, dt = cfg.plant, cfg.dt
+    n = 100_000
+    u = 70 + 40 * np.sin(2 * np.pi * np.arange(n) * dt)
+    z = simulate_zoh(p, u, dt, x0=np.zeros(3))[1:, 0] + np.random.default_rng(0).normal(0, 0.01, n)
+    ref = HysteresisObserver(p, cfg.gains, dt).batch_filter(z, u)
+    text = "\n".join(f"{a!r},{b!r}" for a, b in zip(u.tolist(), z.tolist(), strict=True))
+    out = subprocess.run(
+        [str(d / "harness"), "phso"], input=text, capture_output=True, text=True, check=True
+    ).stdout
+    got = np.loadtxt(out.splitlines(), delimiter=",")
+    agreement = float(np.max(np.max(np.abs(got - ref), axis=0) / np.ptp(ref, axis=0)))
+    return best, agreement
+
+
+def python_times(cfg, steps: int) -> tuple[float, float]:
+    p, dt = cfg.plant, cfg.dt
+    u = (70 + 60 * np.sin(2 * np.pi * np.arange(steps) * dt)).tolist()
+    z = [1.39 * v - 1.0 for v in u]
+    obs = HysteresisObserver(p, cfg.gains, dt)
+    t0 = time.perf_counter()
+    for uk, zk in zip(u, z, strict=True):
+        obs.predict(uk)
+        obs.update(zk)
+    loop = (time.perf_counter() - t0) / steps
+    obs = HysteresisObserver(p, cfg.gains, dt)
+    t0 = time.perf_counter()
+    obs.batch_filter(z, u)
+    batch = (time.perf_counter() - t0) / steps
+    return loop * 1e9, batch * 1e9
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=10_000_000)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+    if shutil.which("cc") is None and shutil.which("gcc") is None:
+        print("bench_codegen: no C compiler; skipped", file=sys.stderr)
+        return 0
+    cfg = load_config(ROOT / "configs" / "paper_experiment.toml")
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for precision in ("float32", "float64"):
+            (phso, eso, ctrl), agree = c_times(cfg, precision, args.steps, Path(tmp))
+            rows[precision] = {
+                "phso_ns": phso,
+                "eso_ns": eso,
+                "controller_ns": ctrl,
+                "phso_agreement": agree,
+            }
+    loop_ns, batch_ns = python_times(cfg, 200_000)
+    print(f"C export, paper_experiment, dt = 0.2 ms (best of 3 runs of {args.steps:.0e} steps)")
+    print(f"{'':10s} {'PHSO ns':>9s} {'ESO ns':>9s} {'ctrl ns':>9s} {'PHSO vs Python':>15s}")
+    for prec, r in rows.items():
+        print(
+            f"{prec:10s} {r['phso_ns']:9.2f} {r['eso_ns']:9.2f} {r['controller_ns']:9.2f} "
+            f"{r['phso_agreement']:15.2e}"
+        )
+    print(
+        f"Python PHSO predict+update: {loop_ns:9.1f} ns/step; batch_filter: {batch_ns:.1f} ns/step"
+    )
+    print(
+        f"speed-up of the C PHSO step (float32) over Python batch_filter: "
+        f"{batch_ns / rows['float32']['phso_ns']:.0f}x; target <= {TARGET_NS:g} ns: "
+        + ("met" if max(r["phso_ns"] for r in rows.values()) <= TARGET_NS else "NOT met")
+    )
+    if args.json:
+        Path(args.json).write_text(
+            json.dumps(
+                {"c": rows, "python_loop_ns": loop_ns, "python_batch_ns": batch_ns}, indent=2
+            )
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,82 @@
+"""``bwdesign export-c`` (registered in :mod:`bwdesign.cli.main`).
+
+Exit codes: 0 written; 1 nothing certifies the gains (nothing written unless
+``--allow-uncertified``); 2 bad input with one ``error:`` line, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from ..codegen.export import OBSERVERS, export_c
+from ..codegen.literals import PRECISIONS
+from ..model.config import load_config
+from ..output.jsonenc import dump_json
+from .args import EXIT_OK
+
+__all__ = ["export_c_args", "run_export_c"]
+
+
+def export_c_args(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``bwdesign export-c``."""
+    p.add_argument("--config", required=True, metavar="STAGE.toml", help="stage configuration")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory for the C files")
+    p.add_argument("--precision", choices=PRECISIONS, default="float64", help="C arithmetic")
+    p.add_argument(
+        "--observer",
+        choices=tuple(OBSERVERS),
+        default="phso",
+        help="the observer the harness runs (the library carries all); default phso",
+    )
+    p.add_argument("--prefix", default="bw", metavar="NAME", help="C name prefix (default bw)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument(
+        "--synthesize",
+        action="store_true",
+        help="export gains synthesised for the config's envelope instead of [observer] gains",
+    )
+    src.add_argument(
+        "--tuning",
+        choices=("digital",),
+        default=None,
+        help="export the digital tuning's observer gains and controller constants",
+    )
+    p.add_argument(
+        "--allow-uncertified",
+        action="store_true",
+        help="export gains that no certificate tier holds for (the header says so)",
+    )
+    p.add_argument(
+        "--allow-unbounded",
+        action="store_true",
+        help="accept parameters outside the bounded Bouc-Wen class",
+    )
+    p.add_argument("--force", action="store_true", help="replace files bwdesign wrote before")
+    p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+
+
+def run_export_c(args: argparse.Namespace) -> int:
+    gains_from = "synthesize" if args.synthesize else ("digital" if args.tuning else "config")
+    res = export_c(
+        load_config(args.config),
+        args.out,
+        precision=args.precision,
+        observer=args.observer,
+        prefix=args.prefix,
+        gains_from=gains_from,
+        allow_uncertified=args.allow_uncertified,
+        allow_unbounded=args.allow_unbounded,
+        force=args.force,
+    )
+    if args.json:
+        print(dump_json({"out_dir": str(res.out_dir), "files": list(res.files), **res.document}))
+        return EXIT_OK
+    s = res.summary
+    status = (
+        f"certified by the {s['tier']} tier for |u'| <= {s['udot_max']:.6g} V/s"
+        if res.certified
+        else "NOT CERTIFIED (exported with --allow-uncertified)"
+    )
+    print(f"{res.out_dir}: {', '.join(res.files)} ({args.precision}); {status}")
+    print(f"  build and check: cc -std=c99 -O2 {res.out_dir}/*.c -lm -o harness")
+    return EXIT_OK

@@ -1,0 +1,289 @@
+"""``bwdesign sweep`` (registered in :mod:`bwdesign.cli.main`).
+
+Exit codes: 0 written (whatever the scenarios did: instability is a result);
+1 the sweep could not be completed (a chunk failed after its retries, no scheduler);
+2 bad input with one ``error:`` line, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from ..control.controllers import make_controller
+from ..control.tuning import digital_tuning
+from ..errors import ConfigError, InputError
+from ..extras import require
+from ..model.config import load_config
+from ..model.params import MODEL_FIELDS
+from ..output.jsonenc import dump_json
+from ..sim.sweep import (
+    METRIC_COLUMNS,
+    SweepError,
+    SweepSpec,
+    box_bounds,
+    check_box,
+    draw_scenarios,
+    run_sweep,
+)
+from .args import EXIT_NO, EXIT_OK, nonneg_float, positive_float
+
+__all__ = ["sweep_args", "run_sweep_command", "parse_uncertainty"]
+
+
+def _count(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"expected an integer > 0, got {v}")
+    return v
+
+
+def _nonneg_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
+    return v
+
+
+def parse_uncertainty(text: str) -> dict[str, tuple[str, float]]:
+    """``"a1=2%,alpha=0.01"`` -> ``{"a1": ("rel", 0.02), "alpha": ("abs", 0.01)}``."""
+    out: dict[str, tuple[str, float]] = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        name, sep, value = item.partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep or name not in MODEL_FIELDS:
+            raise InputError(
+                f"--uncertainty: expected NAME=WIDTH with NAME in {', '.join(MODEL_FIELDS)} "
+                f"(WIDTH as 2% relative or 0.01 absolute), got {item!r}"
+            )
+        rel = value.endswith("%")
+        try:
+            w = float(value[:-1] if rel else value)
+        except ValueError:
+            raise InputError(f"--uncertainty: {name}: not a number: {value!r}") from None
+        if not math.isfinite(w) or w < 0:
+            raise InputError(f"--uncertainty: {name}: half-width must be >= 0, got {value!r}")
+        out[name] = ("rel", w / 100) if rel else ("abs", w)
+    if not out:
+        raise InputError("--uncertainty: no parameter given")
+    return out
+
+
+def sweep_args(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``bwdesign sweep``."""
+    p.add_argument("--config", required=True, metavar="STAGE.toml", help="stage configuration")
+    p.add_argument("--samples", required=True, type=_count, metavar="N", help="scenarios (> 0)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    p.add_argument(
+        "--uncertainty",
+        metavar="SPEC",
+        help="box half-widths, e.g. a1=2%%,a3=2%%,alpha=10%% (relative) or alpha=0.01 (absolute);"
+        " default: the config's [uncertainty] section",
+    )
+    p.add_argument("--distribution", choices=("uniform", "normal"), default="uniform")
+    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of the draw (>= 0)")
+    p.add_argument("--observers", default="phso,eso", help="observers to run (default phso,eso)")
+    p.add_argument(
+        "--tuning",
+        choices=("config", "digital"),
+        default="config",
+        help="config: [observer] gains and [controller] lambdas; digital: the digital tuning",
+    )
+    p.add_argument(
+        "--form",
+        choices=("continuous", "discrete"),
+        default="continuous",
+        help="form of eq. (12) with --tuning config",
+    )
+    p.add_argument(
+        "--duration",
+        type=positive_float,
+        default=None,
+        metavar="S",
+        help="seconds per scenario (default three reference periods, at least 1 s)",
+    )
+    p.add_argument(
+        "--noise-std",
+        type=nonneg_float,
+        default=0.0,
+        metavar="STD",
+        help="sensor noise std (length unit)",
+    )
+    p.add_argument("--delay", action="store_true", help="one-sample computation delay")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=_nonneg_int,
+        default=None,
+        metavar="K",
+        help="local Dask worker processes (default: one per CPU; 0: in this process)",
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="address of a running dask.distributed scheduler",
+    )
+    p.add_argument(
+        "--chunk-size",
+        type=_count,
+        default=1000,
+        metavar="M",
+        help="scenarios per task (default 1000)",
+    )
+    p.add_argument(
+        "--timeout",
+        type=positive_float,
+        default=10.0,
+        metavar="S",
+        help="seconds to wait for --scheduler",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+
+def _spec(config, args) -> SweepSpec:
+    missing = [
+        s for s, v in (("[sampling] dt", config.dt), ("[reference]", config.reference)) if v is None
+    ]
+    if args.tuning == "config":
+        if config.gains is None:
+            missing.append("[observer] gains (or --tuning digital)")
+        if config.controller is None:
+            missing.append("[controller] (or --tuning digital)")
+    if missing:
+        raise ConfigError(f"{config.source or 'config'}: sweep needs {', '.join(missing)}")
+    params, dt, ctl = config.plant, config.dt, config.controller
+    limits = (
+        None
+        if ctl is None or (ctl.u_min is None and ctl.u_max is None)
+        else (
+            -math.inf if ctl.u_min is None else ctl.u_min,
+            math.inf if ctl.u_max is None else ctl.u_max,
+        )
+    )
+    if args.tuning == "digital":
+        tune = digital_tuning(params, dt)
+        gains = tuple(tune.gains)
+        controller = make_controller(
+            params,
+            tune.lambda1,
+            tune.lambda2,
+            form="discrete",
+            dt=dt,
+            integral_rate=tune.integral_rate,
+            u_limits=limits,
+        )
+    else:
+        gains = tuple(config.gains)
+        controller = make_controller(
+            params, ctl.lambda1, ctl.lambda2, form=args.form, dt=dt, u_limits=limits
+        )
+    period = config.reference.period
+    duration = args.duration or max(1.0, 3 * period if period else 1.0)
+    observers = tuple(o.strip().lower() for o in args.observers.split(",") if o.strip())
+    return SweepSpec(
+        params=params,
+        reference=config.reference,
+        dt=dt,
+        duration=duration,
+        controller=controller,
+        gains=gains,
+        observers=observers,
+        noise_std=args.noise_std,
+        delay=args.delay,
+    )
+
+
+def _progress(quiet: bool):
+    if quiet:
+        return None, None
+    tqdm = require(
+        "tqdm", extra="sweep", feature="the sweep's progress bar (--quiet needs none)"
+    ).tqdm
+    bar = tqdm(total=0, unit="chunk", file=sys.stderr, desc="sweep", leave=False)
+
+    def update(done: int, total: int) -> None:
+        bar.total = total
+        bar.n = done
+        bar.refresh()
+
+    return update, bar
+
+
+def run_sweep_command(args: argparse.Namespace) -> int:
+    from ..report.sweep import write_sweep
+
+    config = load_config(args.config)
+    spec = _spec(config, args)
+    if args.uncertainty is not None:
+        bounds = box_bounds(spec.params, parse_uncertainty(args.uncertainty))
+    else:
+        box = getattr(config, "uncertainty", None)
+        if box is None:
+            raise ConfigError(
+                f"{config.source or 'config'}: no [uncertainty] section; give --uncertainty"
+            )
+        bounds = check_box(spec.params, box.bounds(spec.params))
+    scenarios = draw_scenarios(
+        spec.params, bounds, args.samples, seed=args.seed, distribution=args.distribution
+    )
+    progress, bar = _progress(args.quiet)
+    try:
+        table = run_sweep(
+            spec,
+            scenarios,
+            chunk_size=args.chunk_size,
+            workers=args.workers,
+            scheduler=args.scheduler,
+            timeout=args.timeout,
+            progress=progress,
+        )
+    except SweepError as err:
+        print(f"sweep failed: {err}", file=sys.stderr)
+        return EXIT_NO
+    finally:
+        if bar is not None:
+            bar.close()
+    settings = {"seed": args.seed, "distribution": args.distribution, "samples": args.samples}
+    summary = write_sweep(args.out, spec, table, bounds, settings)
+    if args.json:
+        print(
+            dump_json(
+                {
+                    "out_dir": str(args.out),
+                    "summary": summary,
+                    "bounds": bounds,
+                    "columns": [
+                        "scenario",
+                        *MODEL_FIELDS,
+                        "noise_seed",
+                        "observer",
+                        *METRIC_COLUMNS,
+                        "stable",
+                        "status",
+                    ],
+                }
+            )
+        )
+        return EXIT_OK
+    for obs, s in summary.items():
+        me = s["me"]
+        med = (
+            "-"
+            if me is None
+            else f"ME p50 {me['p50']:.4g}, p99 {me['p99']:.4g}, max {me['max']:.4g}"
+        )
+        print(
+            f"{obs.upper()}: {s['scenarios']} scenarios, {s['unstable']} unstable; {med} "
+            f"{spec.params.length_unit}"
+        )
+    print(f"{args.out}/scenarios.parquet, {args.out}/report.md")
+    return EXIT_OK

@@ -1,0 +1,556 @@
+"""Export the certified discrete observers and tracking controller as dependency-free C99.
+
+:func:`export_c` turns a stage configuration into a directory holding
+
+- ``PREFIX.h``: the state structs, ``init``/``reset``/``predict``/``update``/``step``
+  of every sampled observer the package has (PHSO, ESO) and the controller's
+  ``compute``; compile-time constants for ``dt`` and the certified ``|u'|`` bound;
+  a comment block with the certificate summary;
+- ``PREFIX.c``: the implementation: the exact hysteresis jump (``expm1``/``log1p``
+  and their float forms, the only ``<math.h>`` use), the exact ZOH step, the
+  correction; no dynamic memory, no global mutable state, no I/O;
+- ``harness.c``: a ``main`` that reads ``u,z`` lines on stdin, runs one observer
+  step per line and prints the posterior with ``%.17g`` (and a controller mode),
+  so a user checks the code on their own toolchain;
+- ``export.json``: what was exported (gains, K, constants, certificate summary).
+
+``cc -std=c99 DIR/*.c -lm`` builds the harness. Every constant is written as a
+C99 hexadecimal floating literal, exact in the chosen precision
+(:mod:`bwdesign.codegen.literals`); float32 code uses ``f``-suffixed constants and
+the ``f`` math functions, so nothing is promoted to double.
+
+The C step performs the Python classes' float operations in the same order
+(``bwdesign.observers``: :class:`~bwdesign.HysteresisObserver`,
+:class:`~bwdesign.ExtendedStateObserver`; ``bwdesign.control``:
+:class:`~bwdesign.DiscreteTrackingController`, :class:`~bwdesign.TrackingController`),
+so float64 agrees with Python to rounding.
+
+Runtime guard: each ``predict`` compares the input step ``|u_k - u_{k-1}|`` with
+``DU_MAX = UDOT_MAX * DT``; beyond it the certificate does not cover the step, and
+the state's ``uncovered`` flag is set and ``guard_trips`` counts it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tempfile
+from dataclasses import dataclass, field
+from importlib.resources import files
+from pathlib import Path
+from string import Template
+from typing import Any
+
+from .._version import __version__
+from ..certify.results import CertificateReport
+from ..certify.synthesis import synthesize as synthesize_gains
+from ..certify.tiers import certify, certify_discrete
+from ..control.controllers import DiscreteTrackingController
+from ..control.tuning import digital_tuning
+from ..errors import ConfigError, InputError, NotCertifiedError
+from ..model.config import StageConfig
+from ..model.params import require_bounded
+from ..model.plant import discretize
+from ..observers.base import _SampledObserver
+from ..observers.sampled import ExtendedStateObserver, HysteresisObserver
+from ..output.jsonenc import dump_json
+from .literals import CTypes
+
+__all__ = ["OBSERVERS", "CExport", "export_c", "c_sources"]
+
+#: The sampled observers the C library carries, by the name ``--observer`` takes.
+OBSERVERS: dict[str, tuple[type[_SampledObserver], str]] = {
+    "phso": (HysteresisObserver, "hysteresis observer (PHSO, paper eq. 3)"),
+    "eso": (ExtendedStateObserver, "extended state observer (ESO, paper eq. 21)"),
+}
+GAIN_SOURCES = ("config", "synthesize", "digital")
+_PREFIX = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,30}")
+
+
+@dataclass(frozen=True)
+class CExport:
+    """What :func:`export_c` wrote, and why it may be trusted.
+
+    Attributes
+    ----------
+    out_dir : Path
+    files : tuple of str
+        File names written, relative to ``out_dir``.
+    certified : bool
+        Whether a certificate tier holds for the exported gains at the envelope.
+    summary : dict
+        The certificate summary written into the header (tier, envelope, decay, dt, hash).
+    document : dict
+        The content of ``export.json``.
+    """
+
+    out_dir: Path
+    files: tuple[str, ...]
+    certified: bool
+    summary: dict[str, Any]
+    document: dict[str, Any] = field(repr=False)
+
+
+def _template(name: str) -> Template:
+    return Template(files("bwdesign.codegen").joinpath("templates", name).read_text())
+
+
+def _fill(name: str, **values: Any) -> str:
+    try:
+        return _template(name).substitute(values)
+    except KeyError as err:  # a template asks for a value the exporter does not give
+        raise RuntimeError(f"template {name}: no value for ${err.args[0]}") from None
+
+
+def _check_prefix(prefix: str) -> str:
+    if not isinstance(prefix, str) or not _PREFIX.fullmatch(prefix):
+        raise InputError(f"prefix must be a C identifier of at most 31 characters, got {prefix!r}")
+    return prefix
+
+
+def _requirements(config: StageConfig, source: str) -> tuple[float, float]:
+    missing = []
+    if config.dt is None:
+        missing.append("[sampling] dt")
+    if config.envelope_spec is None:
+        missing.append("[envelope] (the |u'| bound the gains are certified for)")
+    if config.controller is None and source != "digital":
+        missing.append("[controller] (lambda1, lambda2)")
+    if config.gains is None and source == "config":
+        missing.append("[observer] gains (or --synthesize / --tuning digital)")
+    if missing:
+        raise ConfigError(f"{config.source or 'config'}: export-c needs {', '.join(missing)}")
+    return float(config.dt), config.envelope().udot_max
+
+
+def _gains(config, source, dt, udot_max):
+    """(continuous gains or None, discrete K or None, certificate report, controller)."""
+    params = config.plant
+    ctl = config.controller
+    if source == "digital":
+        tune = digital_tuning(params, dt)
+        gains = tuple(float(g) for g in tune.gains)
+        controller = DiscreteTrackingController(
+            params,
+            tune.lambda1,
+            tune.lambda2,
+            dt=dt,
+            integral_rate=tune.integral_rate,
+            u_limits=_limits(ctl),
+        )
+        return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller
+    controller = DiscreteTrackingController(
+        params, ctl.lambda1, ctl.lambda2, dt=dt, u_limits=_limits(ctl)
+    )
+    if source == "synthesize":
+        decay = (config.synthesis or {}).get("decay", 100.0)
+        syn = synthesize_gains(
+            params,
+            udot_max=udot_max,
+            decay=decay,
+            pole_radius=(config.synthesis or {}).get("pole_radius"),
+            dt=dt,
+        )
+        if not syn.feasible:
+            return None, None, syn.report, controller
+        if syn.gains is not None:
+            return tuple(syn.gains), None, syn.report, controller
+        K = tuple(syn.discrete_gains)
+        return None, K, certify_discrete(params, K, udot_max=udot_max, dt=dt), controller
+    gains = tuple(config.gains)
+    return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller
+
+
+def _limits(ctl) -> tuple[float, float] | None:
+    if ctl is None or (ctl.u_min is None and ctl.u_max is None):
+        return None
+    lo = -math.inf if ctl.u_min is None else ctl.u_min
+    hi = math.inf if ctl.u_max is None else ctl.u_max
+    return (lo, hi)
+
+
+def _summary(config, rep: CertificateReport | None, udot_max, dt, source) -> dict[str, Any]:
+    best = None if rep is None else rep.best
+    tier = None if best is None else rep.tier(best)
+    return {
+        "certified": best is not None,
+        "tier": best,
+        "udot_max": udot_max,
+        "max_udot": None if tier is None else tier.max_udot,
+        "decay_rate": None if tier is None else tier.decay_rate,
+        "dt": dt,
+        "gains_from": source,
+        "config": Path(config.source).name if config.source else "",
+        "config_sha256": config.sha256,
+    }
+
+
+def _comment(summary: dict[str, Any], gains, K: dict[str, list[float]], params) -> str:
+    def num(v):
+        return "-" if v is None else f"{v:.10g}"
+
+    top = summary["max_udot"]
+    reach = (
+        "the tier holds for every rate up to its search limit"
+        if top is not None and not math.isfinite(top)
+        else f"the tier holds up to {num(top)} V/s"
+    )
+    lines = [
+        f"stage {params.name or '(unnamed)'}: config {summary['config'] or '-'}, "
+        f"sha256 {summary['config_sha256'] or '-'}",
+        f"observer gains from {summary['gains_from']}: continuous l = "
+        + ("-" if gains is None else "(" + ", ".join(f"{g:.17g}" for g in gains) + ")"),
+    ]
+    lines += [
+        f"  {name}: K = (" + ", ".join(f"{k:.17g}" for k in ks) + ")" for name, ks in K.items()
+    ]
+    if summary["certified"]:
+        lines += [
+            f"CERTIFIED by the {summary['tier']} tier for |u'| <= {num(summary['udot_max'])} V/s "
+            f"at dt = {num(summary['dt'])} s ({reach}), certified decay "
+            f"{num(summary['decay_rate'])} 1/s.",
+        ]
+    else:
+        lines += [
+            f"NOT CERTIFIED: no tier holds for |u'| <= {num(summary['udot_max'])} V/s at "
+            f"dt = {num(summary['dt'])} s (exported with --allow-uncertified).",
+        ]
+    return "\n".join(" * " + line for line in lines)
+
+
+def c_sources(
+    config: StageConfig,
+    *,
+    precision: str = "float64",
+    observer: str = "phso",
+    prefix: str = "bw",
+    gains_from: str = "config",
+    allow_uncertified: bool = False,
+    allow_unbounded: bool = False,
+) -> tuple[dict[str, str], bool, dict[str, Any], dict[str, Any]]:
+    """The generated files as text, without writing them (see :func:`export_c`).
+
+    Returns
+    -------
+    files : dict of str to str
+        File name to content.
+    certified : bool
+    summary : dict
+    document : dict
+        The content of ``export.json``.
+    """
+    ct = CTypes(precision)
+    prefix = _check_prefix(prefix)
+    if observer not in OBSERVERS:
+        raise InputError(f"unknown observer {observer!r}; choose one of {', '.join(OBSERVERS)}")
+    if gains_from not in GAIN_SOURCES:
+        raise InputError(f"gains_from must be one of {', '.join(GAIN_SOURCES)}, got {gains_from!r}")
+    params = config.plant
+    require_bounded(params, allow_unbounded)
+    dt, udot_max = _requirements(config, gains_from)
+    gains, K, rep, controller = _gains(config, gains_from, dt, udot_max)
+    summary = _summary(config, rep, udot_max, dt, gains_from)
+    if not summary["certified"] and not allow_uncertified:
+        why = (
+            "synthesis found no certified gains"
+            if gains is None and K is None
+            else (
+                f"no certificate tier holds for these gains at |u'| <= {udot_max:.6g} V/s, "
+                f"dt = {dt:g} s"
+            )
+        )
+        raise NotCertifiedError(f"{why}; nothing exported (--allow-uncertified exports anyway)")
+    if gains is None and K is None:
+        raise NotCertifiedError("synthesis found no gains to export")
+
+    lit = ct.literal
+    names = ct.names()
+    base = {
+        "prefix": prefix,
+        "PREFIX": prefix.upper(),
+        "version": __version__,
+        **names,
+    }
+    observers = {
+        name: cls(params, gains, dt, allow_unbounded=allow_unbounded)
+        if K is None
+        else cls(params, dt=dt, discrete=K, allow_unbounded=allow_unbounded)
+        for name, (cls, _) in OBSERVERS.items()
+    }
+    Ks = {name: [float(k) for k in obs.K] for name, obs in observers.items()}
+    zoh = discretize(params, dt)
+    (f11, f12, f13), (f21, f22, f23) = zoh.F[0], zoh.F[1]
+    proto, impl = [], []
+    for name, (cls, title) in OBSERVERS.items():
+        k1, k2, k3 = Ks[name]
+        vals = dict(base, obs=name, OBS=name.upper(), title=title)
+        proto.append(_fill("observer.h.tmpl", **vals))
+        x3_next = "hysteresis(s->x[2], s->u_prev, u)" if cls._hysteresis else "s->x[2]"
+        impl.append(
+            _fill("observer.c.tmpl", **vals, k1=lit(k1), k2=lit(k2), k3=lit(k3), x3_next=x3_next)
+        )
+    ctl = config.controller
+    l1, l2 = (
+        (ctl.lambda1, ctl.lambda2) if ctl is not None else (controller.lambda1, controller.lambda2)
+    )
+    limits = controller.u_limits
+    saturation = ""
+    if limits is not None:
+        lo, hi = limits
+        if math.isfinite(lo):
+            saturation += f"    if (u < {lit(lo)}) {{\n        return {lit(lo)};\n    }}\n"
+        if math.isfinite(hi):
+            saturation += f"    if (u > {lit(hi)}) {{\n        return {lit(hi)};\n    }}\n"
+    integrate = (
+        f"    c->q = c->q + {lit(dt)} * (x1 - xd);\n"
+        if controller.integral_rate is not None
+        else ""
+    )
+    ck1, ck2 = (float(k) for k in controller.gains)
+    form = (
+        f"lambda1 = {controller.lambda1:g}, lambda2 = {controller.lambda2:g}"
+        + (f", integral rate {controller.integral_rate:g}" if controller.integral_rate else "")
+        + (", digital tuning" if gains_from == "digital" else "")
+    )
+    comment = _comment(summary, gains, Ks, params)
+    header_vals = dict(
+        base,
+        guard=f"{prefix.upper()}_H",
+        summary=comment,
+        dt=lit(dt),
+        udot_max=lit(udot_max),
+        du_max=lit(udot_max * dt),
+        length_unit=params.length_unit,
+        input_unit=params.input_unit,
+        observer_prototypes="\n".join(proto),
+        controller_form=form,
+        lambda1=f"{l1:g}",
+        lambda2=f"{l2:g}",
+    )
+    source_vals = dict(
+        base,
+        stage=params.name or "(unnamed)",
+        sha256=config.sha256 or "-",
+        **_zoh_step(ct, zoh),
+        alpha=lit(params.alpha),
+        beta=lit(params.beta),
+        gamma=lit(params.gamma),
+        a1=lit(params.a1),
+        a2=lit(params.a2),
+        a3=lit(params.a3),
+        ck1=lit(ck1),
+        ck2=lit(ck2),
+        cki=lit(controller.ki),
+        half_dt=lit(0.5 * dt),
+        lambda1_lit=lit(l1),
+        lambda2_lit=lit(l2),
+        saturation=saturation,
+        integrate=integrate,
+        controller_form=form,
+        length_unit=params.length_unit,
+        input_unit=params.input_unit,
+        observers="".join(impl),
+    )
+    init_dispatch, step_dispatch = _harness_dispatch(prefix, list(OBSERVERS))
+    harness = _fill(
+        "harness.c.tmpl",
+        **base,
+        default_observer=observer,
+        init_dispatch=init_dispatch,
+        step_dispatch=step_dispatch,
+    )
+    document = {
+        "bwdesign": __version__,
+        "precision": precision,
+        "prefix": prefix,
+        "harness_observer": observer,
+        "certificate": summary,
+        "gains": None if gains is None else list(gains),
+        "observers": {name: {"K": Ks[name]} for name in OBSERVERS},
+        "controller": controller.to_dict(),
+        "eq12": {"lambda1": l1, "lambda2": l2},
+        "model": {
+            "F": [[f11, f12, f13], [f21, f22, f23]],
+            "g": [float(zoh.g[0]), float(zoh.g[1])],
+            "plant": params.to_dict(),
+        },
+    }
+    out = {
+        f"{prefix}.h": _fill("header.h.tmpl", **header_vals),
+        f"{prefix}.c": _fill("source.c.tmpl", **source_vals),
+        "harness.c": harness,
+        "export.json": dump_json(document) + "\n",
+    }
+    return out, summary["certified"], summary, document
+
+
+def _zoh_step(ct: CTypes, zoh) -> dict[str, str]:
+    """Constants and bodies of the ZOH predict and the correction, in the precision's best form.
+
+    float64 performs the Python classes' operations in their order (agreement to
+    rounding). float32 cannot simply do the same: x1 (about 100 um) carries a
+    rounding error of half an ulp (4e-6 um) per sample, and the x3 estimate, seen
+    only through the slow drift of x1, turns that into errors of 1e-4 of its
+    range. So float32 code keeps x1 as an unevaluated sum ``x[0] + x1_lo``
+    (compensated with TwoSum), propagates increments (``F11 - 1`` and ``F22 - 1``
+    round with a relative, not an absolute, error) and forms the innovation as
+    ``(z - x[0]) - x1_lo``.
+    """
+    lit = ct.literal
+    (f11, f12, f13), (f21, f22, f23) = zoh.F[:2].tolist()
+    g1, g2 = float(zoh.g[0]), float(zoh.g[1])
+    r = ct.real
+    if ct.precision == "float64":
+        return {
+            "zoh_note": " * Evaluated in the order of the Python classes.",
+            "zoh_constants": (
+                f"static const {r} F11 = {lit(f11)}, F12 = {lit(f12)}, F13 = {lit(f13)};\n"
+                f"static const {r} F21 = {lit(f21)}, F22 = {lit(f22)}, F23 = {lit(f23)};\n"
+                f"static const {r} G1 = {lit(g1)}, G2 = {lit(g2)};"
+            ),
+            "compensation": "",
+            "propagate_body": (
+                "    const double x1 = s->x[0], x2 = s->x[1];\n"
+                "    s->x[0] = F11 * x1 + F12 * x2 + F13 * x3 + G1 * u;\n"
+                "    s->x[1] = F21 * x1 + F22 * x2 + F23 * x3 + G2 * u;\n"
+            ),
+            "correct_body": (
+                "    const double r = z - s->x[0];\n"
+                "    s->x[0] = s->x[0] + k1 * r;\n"
+                "    s->x[1] = s->x[1] + k2 * r;\n"
+                "    s->x[2] = s->x[2] + k3 * r;\n"
+            ),
+        }
+    return {
+        "zoh_note": " * Increment form: D11 = F11 - 1, D22 = F22 - 1 keep full float32 precision.",
+        "zoh_constants": (
+            f"static const {r} D11 = {lit(f11 - 1.0)}, F12 = {lit(f12)}, F13 = {lit(f13)};\n"
+            f"static const {r} F21 = {lit(f21)}, D22 = {lit(f22 - 1.0)}, F23 = {lit(f23)};\n"
+            f"static const {r} G1 = {lit(g1)}, G2 = {lit(g2)};"
+        ),
+        "compensation": (
+            "/* hi + lo = a + b exactly (TwoSum; needs IEEE arithmetic: no -ffast-math) */\n"
+            "static void two_sum(float a, float b, float *hi, float *lo)\n"
+            "{\n"
+            "    const float s = a + b;\n"
+            "    const float bb = s - a;\n"
+            "    *lo = (a - (s - bb)) + (b - bb);\n"
+            "    *hi = s;\n"
+            "}\n\n"
+        ),
+        "propagate_body": (
+            "    const float x1 = s->x[0], lo = s->x1_lo, x2 = s->x[1];\n"
+            "    const float d1 = D11 * x1 + F12 * x2 + F13 * x3 + G1 * u + D11 * lo;\n"
+            "    s->x[1] = x2 + (F21 * x1 + D22 * x2 + F23 * x3 + G2 * u + F21 * lo);\n"
+            "    two_sum(x1, lo + d1, &s->x[0], &s->x1_lo);\n"
+        ),
+        "correct_body": (
+            "    const float r = (z - s->x[0]) - s->x1_lo;\n"
+            "    two_sum(s->x[0], s->x1_lo + k1 * r, &s->x[0], &s->x1_lo);\n"
+            "    s->x[1] = s->x[1] + k2 * r;\n"
+            "    s->x[2] = s->x[2] + k3 * r;\n"
+        ),
+    }
+
+
+def _harness_dispatch(prefix: str, names: list[str]) -> tuple[str, str]:
+    init = []
+    step = [
+        "        {",
+        "            char *zend;",
+        "            const double z = strtod(comma + 1, &zend);",
+        "            const int has_z = zend != comma + 1;",
+    ]
+    for i, name in enumerate(names):
+        kw = "if" if i == 0 else "} else if"
+        init += [f'    {kw} (strcmp(name, "{name}") == 0) {{', f"        {prefix}_{name}_init(&s);"]
+        step += [
+            f'            {kw} (strcmp(name, "{name}") == 0) {{',
+            f"                {prefix}_{name}_predict(&s, ({prefix}_real)u);",
+            "                if (has_z) {",
+            f"                    {prefix}_{name}_update(&s, ({prefix}_real)z);",
+            "                }",
+        ]
+    init += [
+        "    } else {",
+        f'        fprintf(stderr, "harness: unknown observer %s ({", ".join(names)})\\n", name);',
+        "        return 2;",
+        "    }",
+    ]
+    step += ["            }", "        }"]
+    return "\n".join(init), "\n".join(step)
+
+
+def export_c(
+    config: StageConfig,
+    out_dir: str | Path,
+    *,
+    precision: str = "float64",
+    observer: str = "phso",
+    prefix: str = "bw",
+    gains_from: str = "config",
+    allow_uncertified: bool = False,
+    allow_unbounded: bool = False,
+    force: bool = False,
+) -> CExport:
+    """Write the C library of the certified observers and controller into ``out_dir``.
+
+    Parameters
+    ----------
+    config : StageConfig
+        Needs [plant], [sampling] dt, [envelope], [controller] and [observer]
+        gains (or ``gains_from="synthesize"`` / ``"digital"``).
+    out_dir : path
+        Output directory (written through the package's output layer).
+    precision : {"float64", "float32"}
+        Arithmetic of the generated code.
+    observer : {"phso", "eso"}
+        The observer the harness runs by default (the library carries all).
+    prefix : str
+        C identifier prefixed to every exported name.
+    gains_from : {"config", "synthesize", "digital"}
+        The config's [observer] gains; gains synthesised for the config's
+        envelope (as ``bwdesign report`` does); or the digital tuning's gains
+        and controller (:func:`bwdesign.digital_tuning`).
+    allow_uncertified : bool
+        Export gains that no certificate tier holds for (the header says so).
+    force : bool
+        Passed to the output layer.
+
+    Returns
+    -------
+    CExport
+
+    Raises
+    ------
+    NotCertifiedError
+        No tier certifies the gains (and ``allow_uncertified`` is False).
+    ConfigError, InputError, UnboundedModelError
+        Bad configuration or options; nothing is written.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {str(out)!r} exists and is not a directory")
+    sources, certified, summary, document = c_sources(
+        config,
+        precision=precision,
+        observer=observer,
+        prefix=prefix,
+        gains_from=gains_from,
+        allow_uncertified=allow_uncertified,
+        allow_unbounded=allow_unbounded,
+    )
+    _write(out, sources, force=force)
+    return CExport(
+        out_dir=out, files=tuple(sources), certified=certified, summary=summary, document=document
+    )
+
+
+def _write(out: Path, sources: dict[str, str], *, force: bool) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    for name, text in sources.items():
+        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, out / name)

@@ -1,0 +1,195 @@
+"""The sweep report: the scenario table's statistics, histograms and the worst scenario replayed."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..model.params import MODEL_FIELDS
+from ..sim.closed_loop import simulate
+from ..sim.sweep import SweepSpec
+from .document import Document
+
+__all__ = ["sweep_document", "sweep_summary", "write_sweep"]
+
+QUANTILES = (0.5, 0.9, 0.99)
+
+
+def sweep_summary(table: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    """Per observer: scenario count, fraction unstable, quantiles and max of each metric."""
+    out: dict[str, Any] = {}
+    for obs in dict.fromkeys(table["observer"].tolist()):
+        sel = table["observer"] == obs
+        stable = table["stable"][sel]
+        doc: dict[str, Any] = {
+            "scenarios": int(sel.sum()),
+            "unstable": int((~stable).sum()),
+            "fraction_unstable": float((~stable).mean()),
+        }
+        for m in ("me", "maxe", "rmse"):
+            v = table[m][sel][stable]
+            doc[m] = (
+                {f"p{round(q * 100)}": float(np.quantile(v, q)) for q in QUANTILES}
+                | {
+                    "max": float(v.max()),
+                    "worst_scenario": int(table["scenario"][sel][stable][v.argmax()]),
+                }
+                if v.size
+                else None
+            )
+        out[obs] = doc
+    return out
+
+
+def sweep_document(
+    spec: SweepSpec,
+    table: Mapping[str, np.ndarray],
+    bounds: Mapping[str, tuple[float, float]],
+    *,
+    out_dir: Path,
+    settings: Mapping[str, Any],
+) -> tuple[Document, dict[str, Any]]:
+    """Build the report; figures are written under ``out_dir/figures`` (a staging path)."""
+    from ..plotting import figures as plotting
+    from ..plotting.sweep import plot_sweep_histograms
+
+    lu = spec.params.length_unit
+    summary = sweep_summary(table)
+    doc = Document(title=f"Monte Carlo sweep: {spec.params.name or 'stage'}")
+    n = len(np.unique(table["scenario"]))
+    doc.para(
+        f"{n} scenarios, seed {settings['seed']}, {settings['distribution']} in the box below; "
+        f"observers {', '.join(o.upper() for o in spec.observers)}; {spec.reference.to_dict()}; "
+        f"dt = {spec.dt:g} s, {spec.duration:g} s per scenario, sensor noise "
+        f"{spec.noise_std:g} {lu} (seeded per scenario), "
+        f"{'one-sample delay, ' if spec.delay else ''}"
+        f"controller {spec.controller.to_dict()['form']} "
+        f"(lambda1 = {spec.controller.lambda1:g}, lambda2 = {spec.controller.lambda2:g}). "
+        "Metrics over the last two reference periods. Rows: scenarios.parquet."
+    )
+    doc.heading("Uncertainty box")
+    rows = [
+        [k, f"{getattr(spec.params, k):.6g}", f"{lo:.6g}", f"{hi:.6g}"]
+        for k, (lo, hi) in bounds.items()
+    ]
+    doc.table(["parameter", "nominal", "low", "high"], rows or [["(none)", "", "", ""]])
+    doc.heading("Tracking error over the scenarios")
+    header = ["observer", "unstable"] + [
+        f"{m.upper()} {q}" for m in ("me", "maxe", "rmse") for q in ("p50", "p90", "p99", "max")
+    ]
+    body = []
+    for obs, s in summary.items():
+        row = [obs.upper(), f"{s['unstable']} ({100 * s['fraction_unstable']:.2f} %)"]
+        for m in ("me", "maxe", "rmse"):
+            row += (
+                ["-"] * 4
+                if s[m] is None
+                else [f"{s[m][k]:.4g}" for k in ("p50", "p90", "p99", "max")]
+            )
+        body.append(row)
+    doc.table(header, body)
+    figs = out_dir / "figures"
+    figs.mkdir(parents=True, exist_ok=True)
+    fig, _ = plot_sweep_histograms(dict(table), length_unit=lu, title="stable scenarios")
+    plotting.save_figure(fig, figs / "histograms.png")
+    doc.figure("figures/histograms.png", f"ME, MAXE and RMSE ({lu}) of the stable scenarios")
+    doc.heading("Worst scenarios, replayed")
+    for obs, s in summary.items():
+        unstable = table["scenario"][(table["observer"] == obs) & ~table["stable"]]
+        worst = (
+            int(unstable[0])
+            if unstable.size
+            else (None if s["me"] is None else s["me"]["worst_scenario"])
+        )
+        if worst is None:
+            continue
+        i = int(np.flatnonzero(table["scenario"] == worst)[0])
+        tp = replace(spec.params, **{k: float(table[k][i]) for k in MODEL_FIELDS})
+        run = simulate(
+            spec.params,
+            spec.reference,
+            dt=spec.dt,
+            duration=spec.duration,
+            observer=obs,
+            gains=spec.gains,
+            controller=spec.controller,
+            true_params=tp,
+            noise_std=spec.noise_std,
+            seed=int(table["noise_seed"][i]),
+            delay=spec.delay,
+        )
+        what = "the first unstable scenario" if unstable.size else "the largest ME"
+        drawn = ", ".join(f"{k} = {float(table[k][i]):.6g}" for k in bounds) or "nominal"
+        metrics = (
+            f"ME {run.metrics.me:.4g}, MAXE {run.metrics.maxe:.4g} {lu}"
+            if run.metrics
+            else run.status
+        )
+        doc.para(
+            f"{obs.upper()}: scenario {worst} ({what}; {drawn}; noise seed "
+            f"{int(table['noise_seed'][i])}): {metrics}."
+        )
+        fig, _ = plotting.plot_simulation(run, title=f"{obs.upper()}, scenario {worst}")
+        name = f"worst_{obs}.png"
+        plotting.save_figure(fig, figs / name)
+        doc.figure(f"figures/{name}", f"{obs.upper()} scenario {worst} replayed with simulate()")
+    doc.heading("Robust certificate")
+    doc.para(
+        "No robust certificate (a certified error bound over the uncertainty box) exists for "
+        "this configuration yet, so the sweep's worst case is not compared with one."
+    )
+    return doc, summary
+
+
+def write_sweep(
+    out_dir,
+    spec: SweepSpec,
+    table: Mapping[str, np.ndarray],
+    bounds: Mapping[str, tuple[float, float]],
+    settings: Mapping[str, Any],
+) -> dict[str, Any]:
+    """Write ``scenarios.parquet``, ``summary.json``, ``report.md``/``.html`` and figures.
+
+    Returns the summary (per observer: unstable count, metric quantiles).
+    """
+    import os
+    import shutil
+    import tempfile
+
+    from ..output.jsonenc import dump_json
+
+    pa, pq = _pyarrow()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".bwdesign-sweep-", dir=out))
+    try:
+        columns = {k: (v.tolist() if v.dtype == object else v) for k, v in table.items()}
+        pq.write_table(pa.table(columns), stage / "scenarios.parquet")
+        doc, summary = sweep_document(spec, table, bounds, out_dir=stage, settings=settings)
+        (stage / "summary.json").write_text(
+            dump_json({"summary": summary, "bounds": dict(bounds), "settings": dict(settings)})
+            + "\n"
+        )
+        (stage / "report.md").write_text(doc.to_markdown())
+        (stage / "report.html").write_text(doc.to_html(stage))
+        for path in sorted(stage.rglob("*")):
+            if path.is_file():
+                dest = out / path.relative_to(stage)
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(path, dest)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return summary
+
+
+def _pyarrow():
+    from ..extras import require
+
+    feature = "writing scenarios.parquet"
+    return require("pyarrow", extra="sweep", feature=feature), require(
+        "pyarrow.parquet", extra="sweep", feature=feature
+    )

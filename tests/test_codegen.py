@@ -1,0 +1,343 @@
+"""C export: the generated code compiles cleanly and agrees with the Python classes."""
+
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import re
+import shutil
+import subprocess
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bwdesign import (
+    DiscreteTrackingController,
+    ExtendedStateObserver,
+    HysteresisObserver,
+    TrackingController,
+    load_config,
+    simulate_zoh,
+)
+from bwdesign.cli.main import main
+from bwdesign.codegen import c_literal, export_c
+from bwdesign.errors import NotCertifiedError
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "configs" / "paper_experiment.toml"
+STACK = ROOT / "configs" / "stack_actuator_800hz.toml"
+CC = shutil.which("cc") or shutil.which("gcc")
+STRICT = [
+    "-std=c99",
+    "-Wall",
+    "-Wextra",
+    "-Wpedantic",
+    "-Wconversion",
+    "-Wdouble-promotion",
+    "-Werror",
+    "-O2",
+]
+N = 100_000
+
+needs_cc = pytest.mark.skipif(
+    CC is None and not os.environ.get("BWDESIGN_REQUIRE_CC"),
+    reason="no C compiler (install gcc)",
+)
+
+
+def _build(out: Path, *extra: str) -> Path:
+    assert CC is not None, "BWDESIGN_REQUIRE_CC is set but no C compiler was found"
+    exe = out / "harness"
+    cmd = [CC, *STRICT, *extra, *sorted(str(p) for p in out.glob("*.c")), "-lm", "-o", str(exe)]
+    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    return exe
+
+
+def _run(exe: Path, mode: str, rows: np.ndarray) -> np.ndarray:
+    text = "\n".join(",".join(repr(float(v)) for v in r) for r in rows) + "\n"
+    res = subprocess.run([str(exe), mode], input=text, capture_output=True, text=True, check=True)
+    return np.loadtxt(res.stdout.splitlines(), delimiter=",", ndmin=2)
+
+
+def _inputs(dt: float, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """1e5-step held inputs (V): a sine, a triangle with minor loops, steps, noise."""
+    t = np.arange(N) * dt
+    tri = 2 / np.pi * np.arcsin(np.sin(2 * np.pi * 1.0 * t))
+    minor = 8 * 2 / np.pi * np.arcsin(np.sin(2 * np.pi * 13.0 * t))
+    steps = np.repeat(rng.uniform(0, 120, N // 2000 + 1), 2000)[:N]
+    return {
+        "sine": 70 + 40 * np.sin(2 * np.pi * t),
+        "triangle_minor_loops": 60 + 45 * tri + minor,
+        "steps": steps,
+        "noise": 60 + 30 * np.sin(2 * np.pi * 0.5 * t) + rng.normal(0, 2.0, N),
+    }
+
+
+@pytest.fixture(scope="module")
+def config():
+    return load_config(CONFIG)
+
+
+@pytest.fixture(scope="module")
+def builds(tmp_path_factory, config):
+    if CC is None:
+        pytest.skip("no C compiler")
+    out = {}
+    for precision in ("float64", "float32"):
+        d = tmp_path_factory.mktemp(precision)
+        export_c(config, d, precision=precision)
+        out[precision] = _build(d)
+    return out
+
+
+@needs_cc
+@pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
+@pytest.mark.parametrize("cls", [HysteresisObserver, ExtendedStateObserver], ids=["phso", "eso"])
+def test_observer_matches_python(builds, config, precision, tol, cls):
+    p, dt = config.plant, config.dt
+    rng = np.random.default_rng(7)
+    mode = "phso" if cls is HysteresisObserver else "eso"
+    for name, u in _inputs(dt, rng).items():
+        X = simulate_zoh(p, u, dt, x0=np.zeros(3))
+        z = X[1:, 0] + rng.normal(0, 0.01, N)  # 10 nm sensor noise
+        ref = cls(p, config.gains, dt).batch_filter(z, u)
+        got = _run(builds[precision], mode, np.column_stack([u, z]))
+        scale = np.ptp(ref, axis=0)
+        err = np.max(np.abs(got - ref), axis=0) / scale
+        assert got.shape == ref.shape
+        assert np.all(err <= tol), f"{name}: relative error {err} > {tol}"
+
+
+@needs_cc
+@pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
+def test_controllers_match_python(builds, config, precision, tol):
+    p, dt, c = config.plant, config.dt, config.controller
+    rng = np.random.default_rng(3)
+    t = np.arange(N) * dt
+    xd = 100 + 80 * np.sin(2 * np.pi * t)
+    vd = 80 * 2 * np.pi * np.cos(2 * np.pi * t)
+    ad = -80 * (2 * np.pi) ** 2 * np.sin(2 * np.pi * t)
+    xhat = np.column_stack([xd, vd, np.zeros(N)]) + rng.normal(0, [0.5, 50.0, 0.1], (N, 3))
+    rows = np.column_stack([xhat, xd, vd, ad])
+    for mode, ctl in (
+        ("controller", DiscreteTrackingController(p, c.lambda1, c.lambda2, dt=dt)),
+        ("eq12", TrackingController(p, c.lambda1, c.lambda2)),
+    ):
+        ref = np.array([ctl(r[:3], tuple(r[3:])) for r in rows])
+        got = _run(builds[precision], mode, rows)[:, 0]
+        err = np.max(np.abs(got - ref)) / np.ptp(ref)
+        assert err <= tol, f"{mode}: relative error {err:.3g} > {tol}"
+
+
+@needs_cc
+def test_digital_tuning_with_integral_and_saturation(tmp_path, config):
+    """The digital-tuning form (integral action) and amplifier limits, against Python."""
+    from bwdesign import digital_tuning
+    from bwdesign.model.config import ControllerSettings
+
+    cfg = replace(
+        config, controller=ControllerSettings(lambda1=1.0, lambda2=2.0, u_min=0.0, u_max=100.0)
+    )
+    res = export_c(cfg, tmp_path, gains_from="digital")
+    exe = _build(tmp_path)
+    tune = digital_tuning(cfg.plant, cfg.dt)
+    ctl = DiscreteTrackingController(
+        cfg.plant,
+        tune.lambda1,
+        tune.lambda2,
+        dt=cfg.dt,
+        integral_rate=tune.integral_rate,
+        u_limits=(0.0, 100.0),
+    )
+    rng = np.random.default_rng(11)
+    n = 20_000
+    rows = np.column_stack(
+        [
+            rng.normal(100, 30, (n, 1)),
+            rng.normal(0, 300, (n, 1)),
+            rng.normal(0, 1, (n, 1)),
+            rng.normal(100, 30, (n, 1)),
+            rng.normal(0, 300, (n, 1)),
+            rng.normal(0, 1e4, (n, 1)),
+        ]
+    )
+    ref = np.array([ctl(r[:3], tuple(r[3:])) for r in rows])
+    got = _run(exe, "controller", rows)[:, 0]
+    assert ref.min() == 0.0 and ref.max() == 100.0  # the limits were exercised
+    assert np.max(np.abs(got - ref)) / np.ptp(ref) <= 1e-12
+    assert res.document["controller"]["integral_rate"] == tune.integral_rate
+    obs = HysteresisObserver(cfg.plant, tune.gains, cfg.dt)
+    assert res.document["observers"]["phso"]["K"] == obs.K.tolist()
+
+
+def _shared_library(out: Path) -> ctypes.CDLL:
+    lib = out / "libbw.so"
+    subprocess.run(
+        [CC, *STRICT, "-shared", "-fPIC", str(out / "bw.c"), "-lm", "-o", str(lib)],
+        check=True,
+        capture_output=True,
+    )
+    return ctypes.CDLL(str(lib))
+
+
+class _Observer(ctypes.Structure):
+    _fields_ = [
+        ("x", ctypes.c_double * 3),
+        ("x_prior", ctypes.c_double * 3),
+        ("x1_lo", ctypes.c_double),
+        ("u_prev", ctypes.c_double),
+        ("guard_trips", ctypes.c_ulong),
+        ("uncovered", ctypes.c_int),
+    ]
+
+
+@needs_cc
+def test_runtime_guard_flags_uncertified_steps(tmp_path, config):
+    res = export_c(config, tmp_path)
+    lib = _shared_library(tmp_path)
+    du_max = res.summary["udot_max"] * config.dt
+    s = _Observer()
+    lib.bw_phso_init(ctypes.byref(s))
+    step = lib.bw_phso_step
+    step.argtypes = [ctypes.POINTER(_Observer), ctypes.c_double, ctypes.c_double]
+    step(ctypes.byref(s), 0.9 * du_max, 0.0)  # within the certified rate
+    assert (s.uncovered, s.guard_trips) == (0, 0)
+    step(ctypes.byref(s), 0.9 * du_max + 1.01 * du_max, 0.0)  # beyond it
+    assert (s.uncovered, s.guard_trips) == (1, 1)
+    step(ctypes.byref(s), s.u_prev, 0.0)
+    assert (s.uncovered, s.guard_trips) == (0, 1)
+    header = (tmp_path / "bw.h").read_text()
+    assert "CERTIFIED by the sampled tier" in header
+    assert "#define BW_UDOT_MAX" in header and "#define BW_DT" in header
+
+
+def test_literals_are_exact():
+    for v in (0.1, -512.0, 159827.5, 1e-300, 2.0**-1074, 0.0015987206823946071):
+        assert float.fromhex(c_literal(v, "float64")) == v
+        lit = c_literal(v, "float32")
+        assert lit.endswith("f") and float.fromhex(lit[:-1]) == float(np.float32(v))
+    with pytest.raises(ValueError, match="non-finite"):
+        c_literal(float("nan"), "float64")
+    with pytest.raises(ValueError, match="overflows float32"):
+        c_literal(1e39, "float32")
+
+
+@needs_cc
+def test_float32_code_has_no_double(tmp_path, config):
+    export_c(config, tmp_path, precision="float32")
+    src = (tmp_path / "bw.c").read_text()
+    assert "double" not in src
+    for fn in ("expm1f(", "log1pf(", "expf(", "fabsf("):
+        assert fn in src
+    # every floating constant carries the f suffix
+    consts = re.findall(r"0x[0-9a-f.]+p[+-]\d+\w?", src)
+    assert consts and all(c.endswith("f") for c in consts)
+
+
+def test_synthesized_gains(tmp_path, config):
+    """--synthesize exports the gains bwdesign report synthesises, certified at the envelope."""
+    from bwdesign import synthesize
+
+    res = export_c(config, tmp_path, gains_from="synthesize")
+    syn = synthesize(config.plant, udot_max=config.envelope().udot_max, decay=100.0, dt=config.dt)
+    assert res.certified and syn.feasible
+    assert res.document["observers"]["phso"]["K"] == pytest.approx(list(syn.discrete_gains))
+    assert "observer gains from synthesize" in (tmp_path / "bw.h").read_text()
+
+
+def test_uncertified_gains_are_refused(tmp_path, config):
+    # the paper's gains at 1e5 V/s, 25x what any tier certifies for them
+    bad = replace(config, envelope_spec={"udot_max": 1e5})
+    with pytest.raises(NotCertifiedError, match="no certificate tier holds"):
+        export_c(bad, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    res = export_c(bad, tmp_path / "out", allow_uncertified=True)
+    assert not res.certified
+    assert "NOT CERTIFIED" in (tmp_path / "out" / "bw.h").read_text()
+
+
+def _stage(tmp_path: Path, text: str) -> str:
+    p = tmp_path / "stage.toml"
+    p.write_text(text)
+    return str(p)
+
+
+_PLANT = """[plant]
+a1 = 159827.5
+a2 = 713.8
+a3 = 222665.02
+alpha = 0.4795
+beta = {beta}
+gamma = 0.0378
+"""
+_DT = "[sampling]\ndt = 2e-4\n"
+_GAINS = """[observer]
+gains = [8.0, 64.0, -512.0]
+"""
+_REST = """[controller]
+lambda1 = 1.0
+lambda2 = 2.0
+[envelope]
+udot_max = 400.0
+"""
+
+
+@pytest.mark.parametrize(
+    "label, argv, stage, message",
+    [
+        ("unknown observer", ["--observer", "ukf"], None, "invalid choice"),
+        ("unknown precision", ["--precision", "float16"], None, "invalid choice"),
+        ("bad prefix", ["--prefix", "9lives"], None, "C identifier"),
+        ("no dt", [], _PLANT.format(beta=0.3762) + _GAINS + _REST, r"\[sampling\] dt"),
+        ("no gains", [], _PLANT.format(beta=0.3762) + _DT + _REST, r"\[observer\] gains"),
+        ("unbounded plant", [], _PLANT.format(beta=-1.3567) + _DT + _GAINS + _REST, "bounded"),
+    ],
+)
+def test_bad_input(tmp_path, capsys, label, argv, stage, message):
+    cfg = _stage(tmp_path, stage) if stage else str(CONFIG)
+    out = tmp_path / "out"
+    code = main(["export-c", "--config", cfg, "--out", str(out), *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2, label
+    assert err[-1].startswith("error:") and "Traceback" not in "".join(err)
+    assert re.search(message, err[-1]), err[-1]
+    assert not out.exists()
+
+
+def test_unwritable_output_is_an_error(tmp_path, capsys):
+    target = tmp_path / "afile"
+    target.write_text("user data\n")
+    code = main(["export-c", "--config", str(CONFIG), "--out", str(target)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("error:")
+    assert target.read_text() == "user data\n"
+
+
+def test_cli_json(tmp_path, capsys):
+    code = main(["export-c", "--config", str(STACK), "--out", str(tmp_path / "c"), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert doc["certificate"]["certified"] and doc["files"] == [
+        "bw.h",
+        "bw.c",
+        "harness.c",
+        "export.json",
+    ]
+
+
+@pytest.mark.skipif(shutil.which("arm-none-eabi-gcc") is None, reason="no arm-none-eabi-gcc")
+@pytest.mark.parametrize("precision", ["float32", "float64"])
+def test_cross_compiles_for_cortex_m4f(tmp_path, config, precision):
+    export_c(config, tmp_path, precision=precision)
+    obj = tmp_path / "bw.o"
+    flags = ["-mcpu=cortex-m4", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-mthumb"]
+    subprocess.run(
+        ["arm-none-eabi-gcc", *STRICT, "-Os", *flags, "-c", str(tmp_path / "bw.c"), "-o", str(obj)],
+        check=True,
+        capture_output=True,
+    )
+    size = subprocess.run(["arm-none-eabi-size", str(obj)], capture_output=True, text=True)
+    assert size.returncode == 0 and "text" in size.stdout

@@ -1,0 +1,286 @@
+"""Batched simulation and Monte Carlo sweeps: agreement with simulate, independence of chunking."""
+
+from __future__ import annotations
+
+import json
+import re
+import socket
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from bwdesign import (
+    DiscreteTrackingController,
+    Sine,
+    TrackingController,
+    Triangle,
+    digital_tuning,
+    hysteresis_increment,
+    preset,
+    simulate,
+)
+from bwdesign.cli.main import main
+from bwdesign.errors import InputError, UnboundedModelError
+from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
+from bwdesign.sim.sweep import SweepError, SweepSpec, box_bounds, draw_scenarios, run_sweep
+
+DT = 2e-4
+P = preset("paper_experiment")
+BOX = {k: ("rel", 0.02) for k in ("a1", "a2", "a3")} | {
+    k: ("rel", 0.1) for k in ("alpha", "beta", "gamma")
+}
+
+
+@pytest.fixture(scope="module")
+def tune():
+    return digital_tuning(P, DT)
+
+
+def _mismatched(n, seed):
+    cols = draw_scenarios(P, box_bounds(P, BOX), n, seed=seed)
+    return [replace(P, **{k: float(cols[k][i]) for k in BOX}) for i in range(n)], cols
+
+
+def test_stacked_zoh_matches_discretize():
+    from bwdesign.model.plant import discretize
+    from bwdesign.sim.batch import _true_matrices
+
+    tps = [P, preset("paper_simulation_corrected"), replace(P, a1=1e9, a2=10.0), replace(P, a2=5e4)]
+    T = _true_matrices(tps, DT)
+    for i, tp in enumerate(tps):
+        z = discretize(tp, DT)
+        got = [[T[f"p{r + 1}{c + 1}"][i] for c in range(3)] for r in range(2)]
+        np.testing.assert_allclose(got, z.F[:2], rtol=1e-12, atol=1e-14 * np.abs(z.F[:2]).max())
+        np.testing.assert_allclose([T["g1"][i], T["g2"][i]], z.g[:2], rtol=1e-12)
+
+
+def test_hysteresis_batch_matches_scalar():
+    rng = np.random.default_rng(0)
+    for p in (P, preset("paper_simulation_corrected"), replace(P, gamma=-0.3)):
+        h = rng.uniform(-1.5, 1.5, 4000) * p.alpha / (p.beta + p.gamma)
+        u0 = rng.uniform(-50, 50, 4000)
+        u1 = u0 + rng.choice([0.0, 1e-9, 0.3, -0.3, 40.0, -40.0], 4000)
+        got = hysteresis_increment_batch(p.alpha, p.beta, p.gamma, h, u0, u1)
+        ref = np.array([hysteresis_increment(p, *a) for a in zip(h, u0, u1, strict=True)])
+        np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("observer", ["phso", "eso"])
+@pytest.mark.parametrize(
+    "label, kw",
+    [
+        ("plain", {}),
+        ("delay", {"delay": True}),
+        ("delay, stale", {"delay": True, "compensate_delay": False}),
+    ],
+)
+def test_batch_matches_simulate(tune, observer, label, kw):
+    tps, cols = _mismatched(5, seed=2)
+    ref = Triangle(amplitude=60, offset=80, frequency=2, corner_time=0.02)
+    ctl = DiscreteTrackingController(
+        P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate, u_limits=(0, 100)
+    )
+    seeds = cols["noise_seed"]
+    b = simulate_batch(
+        P,
+        ref,
+        tps,
+        dt=DT,
+        duration=1.0,
+        controller=ctl,
+        observer=observer,
+        gains=tune.gains,
+        noise_std=0.02,
+        seeds=seeds,
+        **kw,
+    )
+    for i, tp in enumerate(tps):
+        r = simulate(
+            P,
+            ref,
+            dt=DT,
+            duration=1.0,
+            controller=ctl,
+            observer=observer,
+            gains=tune.gains,
+            true_params=tp,
+            noise_std=0.02,
+            seed=int(seeds[i]),
+            **kw,
+        )
+        assert b.stable[i] == r.stable and b.status[i] == r.status
+        m = r.metrics
+        got = [b.me[i], b.maxe[i], b.rmse[i], *b.estimation_rmse[i]]
+        want = [m.me, m.maxe, m.rmse, *r.estimation_rmse]
+        np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_batch_detects_divergence_per_scenario():
+    """An eq. 12 loop with the paper's constants and a 3x a3 error diverges; the rest does not."""
+    tps = [P, replace(P, a3=3 * P.a3), replace(P, a1=1.01 * P.a1)]
+    ctl = TrackingController(P, 200.0, 200.0, estimate_limits=None)
+    ref = Sine(amplitude=40, offset=60, frequency=2)
+    gains = (2286.2, 1208283.0, -6256.75)
+    b = simulate_batch(P, ref, tps, dt=DT, duration=0.5, controller=ctl, gains=gains)
+    for i, tp in enumerate(tps):
+        r = simulate(P, ref, dt=DT, duration=0.5, controller=ctl, gains=gains, true_params=tp)
+        assert (b.stable[i], b.status[i]) == (r.stable, r.status)
+    assert not b.stable[1] and b.stable[0] and np.isnan(b.me[1])
+
+
+def test_draw_depends_only_on_the_seed():
+    bounds = box_bounds(P, BOX)
+    a = draw_scenarios(P, bounds, 50, seed=7)
+    b = draw_scenarios(P, bounds, 50, seed=7)
+    c = draw_scenarios(P, bounds, 50, seed=8)
+    assert all(np.array_equal(a[k], b[k]) for k in a)
+    assert not np.array_equal(a["a1"], c["a1"])
+    for k, (lo, hi) in bounds.items():
+        assert np.all((a[k] >= lo) & (a[k] <= hi))
+    n = draw_scenarios(P, bounds, 2000, seed=1, distribution="normal")
+    for k, (lo, hi) in bounds.items():
+        assert np.all((n[k] >= lo) & (n[k] <= hi))
+        # truncated at the 95 % interval: the spread is narrower than the uniform's
+        assert np.std(n[k]) < (hi - lo) / np.sqrt(12)
+
+
+def _spec(tune, observers=("phso", "eso")):
+    ctl = DiscreteTrackingController(
+        P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
+    )
+    return SweepSpec(
+        params=P,
+        reference=Sine(amplitude=80, offset=100, frequency=5),
+        dt=DT,
+        duration=0.4,
+        controller=ctl,
+        gains=tuple(tune.gains),
+        observers=observers,
+        noise_std=0.02,
+    )
+
+
+def _equal(a, b):
+    assert a.keys() == b.keys()
+    for k in a:
+        if a[k].dtype.kind == "f":
+            assert np.array_equal(a[k], b[k], equal_nan=True), k
+        else:
+            assert np.array_equal(a[k], b[k]), k
+
+
+def test_result_does_not_depend_on_chunks(tune):
+    spec = _spec(tune)
+    sc = draw_scenarios(P, box_bounds(P, BOX), 12, seed=4)
+    one = run_sweep(spec, sc, chunk_size=12, workers=0)
+    many = run_sweep(spec, sc, chunk_size=5, workers=0)
+    _equal(one, many)
+    assert one["scenario"].tolist() == sorted(list(range(12)) * 2)
+    assert set(one["observer"]) == {"phso", "eso"}
+
+
+@pytest.mark.slow
+def test_local_cluster_equals_single_process(tune):
+    """A real dask.distributed LocalCluster with two worker processes, row for row."""
+    pytest.importorskip("distributed")
+    spec = _spec(tune)
+    sc = draw_scenarios(P, box_bounds(P, BOX), 16, seed=5)
+    _equal(
+        run_sweep(spec, sc, chunk_size=16, workers=0), run_sweep(spec, sc, chunk_size=3, workers=2)
+    )
+
+
+def test_a_scheduler_that_does_not_answer_times_out(tune):
+    pytest.importorskip("distributed")
+    with socket.socket() as s:  # a port on this machine that nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    sc = draw_scenarios(P, {}, 2, seed=0)
+    with pytest.raises(SweepError, match="no Dask scheduler answered"):
+        run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tcp://127.0.0.1:{port}", timeout=2)
+
+
+def test_a_failing_chunk_is_reported_not_dropped(tune, monkeypatch):
+    import bwdesign.sim.sweep as sweep
+
+    calls = []
+
+    def flaky(spec, cols):
+        calls.append(1)
+        if int(cols["scenario"][0]) == 4:
+            raise RuntimeError("worker lost")
+        return real(spec, cols)
+
+    real = sweep.run_chunk
+    monkeypatch.setattr(sweep, "run_chunk", flaky)
+    sc = draw_scenarios(P, {}, 8, seed=0)
+    with pytest.raises(SweepError, match=r"scenarios 4\.\.7 failed after 2 retries"):
+        run_sweep(_spec(tune, ("eso",)), sc, chunk_size=4, workers=0, retries=2)
+    assert len(calls) == 1 + 3  # the good chunk once, the bad one 1 + 2 retries
+
+
+def test_bad_inputs(tune):
+    with pytest.raises(InputError, match="> 0"):
+        draw_scenarios(P, {}, 0)
+    with pytest.raises(UnboundedModelError, match="bounded class"):
+        box_bounds(P, {"beta": ("rel", 0.95)})  # beta - gamma < 0 at a corner
+    with pytest.raises(InputError, match="stay > 0"):
+        box_bounds(P, {"a3": ("rel", 1.5)})
+    with pytest.raises(InputError, match="unknown parameter"):
+        box_bounds(P, {"zeta": ("rel", 0.1)})
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--samples", "0"], "expected an integer > 0"),
+        (["--samples", "-5"], "expected an integer > 0"),
+        (["--samples", "3", "--uncertainty", "beta=95%"], "bounded class"),
+        (["--samples", "3", "--uncertainty", "zeta=2%"], "NAME=WIDTH"),
+        (["--samples", "3"], r"no \[uncertainty\] section"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--seed", "-1"], "integer >= 0"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--observers", "ukf"], "sweep observers"),
+    ],
+)
+def test_cli_bad_input(tmp_path, capsys, argv, message):
+    out = tmp_path / "out"
+    code = main(["sweep", "--config", "configs/paper_experiment.toml", "--out", str(out), *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("error:")
+    assert re.search(message, err[-1]), err[-1]
+    assert not out.exists()
+
+
+def test_cli_writes_table_and_report(tmp_path, capsys):
+    pq = pytest.importorskip("pyarrow.parquet")
+    out = tmp_path / "sw"
+    code = main(
+        [
+            "sweep",
+            "--config",
+            "configs/paper_experiment.toml",
+            "--samples",
+            "6",
+            "--uncertainty",
+            "a1=2%,alpha=10%",
+            "--tuning",
+            "digital",
+            "--duration",
+            "0.4",
+            "--workers",
+            "0",
+            "--quiet",
+            "--json",
+            "--out",
+            str(out),
+        ]
+    )
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0
+    t = pq.read_table(out / "scenarios.parquet").to_pydict()
+    assert t["scenario"] == sorted(list(range(6)) * 2)
+    for col in ("a1", "alpha", "noise_seed", "maxe", "me", "rmse", "est_rmse_x1", "stable"):
+        assert col in t
+    assert doc["summary"]["phso"]["scenarios"] == 6
+    assert (out / "report.md").exists() and (out / "figures" / "histograms.png").exists()
