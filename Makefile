@@ -43,6 +43,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
 	$(BIN)/python benchmarks/bench_certify.py
 	$(BIN)/python benchmarks/bench_codegen.py
+	$(BIN)/python benchmarks/bench_sweep.py
 
 # the sdist and the wheel (the wheel built from the sdist) into dist/, checked as an index would
 dist: $(STAMP)
