@@ -27,6 +27,7 @@ LAYERS = (
     ("codegen",),
     ("sim",),
     ("report",),
+    ("testing",),
     ("cli",),
 )
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}

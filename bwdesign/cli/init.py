@@ -24,6 +24,7 @@ from .._version import __version__
 from ..certify.synthesis import default_pole_radius
 from ..errors import ConfigError
 from ..model.params import BoucWenParams
+from ..model.requirements import REQUIREMENT_KEYS, SETTING_KEYS
 from ..model.stage_presets import stage_preset_path, stage_presets
 from ..output.jsonenc import dump_json
 from .args import EXIT_OK
@@ -88,6 +89,9 @@ _SPEC: dict[str, list[tuple[str, str, str | None]]] = {
         ("decay", "1/s: decay rate asked of the synthesised gains", "100.0"),
         ("pole_radius", "rad/s: observer pole-disk radius", None),
     ],
+    # one source: the requirements schema (bwdesign check, bwdesign.testing)
+    "requirements": [(k, meaning, None) for k, (_, meaning) in REQUIREMENT_KEYS.items()]
+    + [(k, meaning, None) for k, (_, meaning) in SETTING_KEYS.items()],
 }
 _REFERENCE_KEYS = {
     "sine": {"amplitude", "offset", "frequency", "phase"},
@@ -102,6 +106,7 @@ _HEADINGS = {
     "envelope": "the input-rate envelope |u'| <= udot_max the certificates hold for",
     "reference": "the trajectory to track (the report needs it)",
     "synthesis": "what the report asks of the gain synthesis (optional)",
+    "requirements": "what `bwdesign check` and your CI demand of the stage (optional)",
 }
 _SECTION_ORDER = (
     "plant",
@@ -111,6 +116,7 @@ _SECTION_ORDER = (
     "reference",
     "envelope",
     "synthesis",
+    "requirements",
 )
 
 

@@ -100,6 +100,12 @@ COMMANDS: list[Command] = [
         _lazy("cli.sweep", "run_sweep_command"),
     ),
     (
+        "check",
+        "check the [requirements] of stage files (exit 1 when one fails), for CI",
+        _lazy("cli.check", "check_args"),
+        _lazy("cli.check", "run_check"),
+    ),
+    (
         "report",
         "write the certified-gains report (Markdown, HTML, JSON, figures) for a stage config",
         _report_args,

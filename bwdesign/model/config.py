@@ -27,6 +27,7 @@ from ..errors import BWDesignError, ConfigError, ParameterError
 from .envelope import Envelope, derive_envelope, given_envelope
 from .params import PRESETS, BoucWenParams, preset
 from .references import Reference, reference_from_dict
+from .requirements import parse_requirements
 from .stage_presets import resolve_config, stage_presets
 
 __all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant"]
@@ -39,6 +40,7 @@ _SECTIONS = {
     "envelope": {"udot_max", "from_reference", "margin"},
     "reference": None,  # checked per kind
     "synthesis": {"decay", "pole_radius"},
+    "requirements": None,  # checked by model.requirements
 }
 
 
@@ -77,6 +79,8 @@ class StageConfig:
         The ``[envelope]`` table as given; see :meth:`envelope`.
     synthesis : dict or None
         ``decay`` (1/s) and ``pole_radius`` (rad/s) for the report's gain synthesis.
+    requirements : dict or None
+        The ``[requirements]`` a user's CI checks (:mod:`bwdesign.model.requirements`).
     source : str
         Path of the file.
     sha256 : str
@@ -90,6 +94,7 @@ class StageConfig:
     reference: Reference | None = None
     envelope_spec: dict[str, Any] | None = None
     synthesis: dict[str, float] | None = None
+    requirements: dict[str, Any] | None = None
     source: str = ""
     sha256: str = ""
 
@@ -218,6 +223,9 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         reference=reference,
         envelope_spec=env,
         synthesis=synthesis,
+        requirements=(parse_requirements(data["requirements"]) or None)
+        if "requirements" in data
+        else None,
         source=source,
         sha256=sha256,
     )
