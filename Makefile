@@ -36,8 +36,8 @@ paper: $(STAMP)
 	$(BIN)/python analysis/paper_tables.py --out reports/paper
 
 lint: $(STAMP)
-	$(BIN)/ruff check bwdesign tests analysis benchmarks
-	$(BIN)/ruff format --check bwdesign tests analysis benchmarks
+	$(BIN)/ruff check bwdesign tests analysis benchmarks examples
+	$(BIN)/ruff format --check bwdesign tests analysis benchmarks examples
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
