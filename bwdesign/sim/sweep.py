@@ -340,13 +340,19 @@ def _run_dask(spec, pieces, slices, workers, scheduler, retries, timeout, progre
                     f"no Dask scheduler answered at {scheduler!r} within {timeout:g} s ({err})"
                 ) from None
         else:
-            cluster = LocalCluster(
-                n_workers=workers or os.cpu_count() or 1,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=":0",
-                silence_logs=logging.ERROR,
-            )
+            try:
+                cluster = LocalCluster(
+                    n_workers=workers or os.cpu_count() or 1,
+                    threads_per_worker=1,
+                    processes=True,
+                    dashboard_address=":0",
+                    silence_logs=logging.ERROR,
+                )
+            except Exception as err:  # noqa: BLE001 - no cluster: say so, no traceback
+                raise SweepError(
+                    f"could not start a local Dask cluster ({type(err).__name__}: {err}); "
+                    "--workers 0 runs the sweep in this process"
+                ) from None
             client = Client(cluster)
         with client:
             futures = {
