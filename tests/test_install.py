@@ -92,9 +92,9 @@ def test_a_missing_extra_on_the_command_line_is_one_error_line(monkeypatch, caps
         require("bwdesign_no_such_module", extra="sweep", feature="bwdesign sweep")
         return 0
 
-    command = ("sweep", "a feature with an optional dependency", lambda p: None, run)
+    command = ("needs-extra", "a feature with an optional dependency", lambda p: None, run)
     monkeypatch.setattr(main_mod, "COMMANDS", [*main_mod.COMMANDS, command])
-    assert main_mod.main(["sweep"]) == 2
+    assert main_mod.main(["needs-extra"]) == 2
     captured = capsys.readouterr()
     assert captured.out == ""
     assert captured.err == (

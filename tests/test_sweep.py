@@ -284,3 +284,30 @@ def test_cli_writes_table_and_report(tmp_path, capsys):
         assert col in t
     assert doc["summary"]["phso"]["scenarios"] == 6
     assert (out / "report.md").exists() and (out / "figures" / "histograms.png").exists()
+
+
+def test_missing_extra_names_it(tmp_path, capsys, monkeypatch):
+    """Without tqdm (the sweep extra) the progress bar is one error line naming the extra."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "tqdm", None)  # import tqdm now raises ModuleNotFoundError
+    out = tmp_path / "sw"
+    code = main(
+        [
+            "sweep",
+            "--config",
+            "configs/paper_experiment.toml",
+            "--samples",
+            "2",
+            "--uncertainty",
+            "a1=2%",
+            "--workers",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err[-1].startswith("error:")
+    assert "pip install 'bwdesign[sweep]'" in err[-1]
+    assert not out.exists()
