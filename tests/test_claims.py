@@ -3,6 +3,9 @@
 Each test here failed on the commit the issue was filed against (16f545d).
 """
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -12,6 +15,7 @@ from bwdesign import (
     UnscentedObserver,
     preset,
 )
+from bwdesign.cli.main import main
 from bwdesign.errors import GainError, InputError
 
 P = preset("paper_experiment")
@@ -153,3 +157,124 @@ def test_ukf_interface_matches_or_says_what_differs():
     for o in (_phso(), _eso()):
         assert o.K.shape == (3,) and o.gains is not None
         o.as_iosystem()
+
+
+# -- item 6: no silent options ---------------------------------------------------
+
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "configs" / "paper_experiment.toml"
+SIM = ["simulate", "--plant", "paper_experiment", "--amplitude", "80", "--offset", "100"]
+SIM += ["--frequency", "1", "--lambda1", "1", "--lambda2", "2", "--dt", "2e-4"]
+SIM += ["--duration", "0.2"]
+
+
+def _run(argv, capsys):
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--observer", "ukf", "--gains", "8,64,-512"], "--gains does not apply to --observer ukf"),
+        (["--gains", "8,64,-512", "--udot-max", "400"], "--udot-max applies to --observer ukf"),
+    ],
+    ids=["ukf-gains", "phso-udot-max"],
+)
+def test_options_that_do_not_apply_are_errors(capsys, extra, message):
+    code, out, err = _run(SIM + extra, capsys)
+    assert code == 2 and out == ""
+    assert err.startswith("error: ") and len(err.splitlines()) == 1 and message in err
+
+
+def test_ukf_step_has_a_udot_max_path(capsys):
+    argv = ["simulate", "--plant", "paper_experiment", "--reference", "step"]
+    argv += ["--amplitude", "10", "--observer", "ukf", "--lambda1", "1", "--lambda2", "2"]
+    argv += ["--dt", "2e-4", "--duration", "0.2", "--json"]
+    code, _, err = _run(argv, capsys)
+    assert code == 2 and "udot_max" in err
+    code, out, err = _run(argv + ["--udot-max", "400"], capsys)
+    assert code == 0 and err == ""
+    assert json.loads(out)["settings"]["observer"] == "ukf"
+
+
+def test_negative_gain_lists_read_as_written(capsys):
+    spaced = _run(SIM + ["--gains", "-8,64,-512", "--json"], capsys)
+    joined = _run(SIM + ["--gains=-8,64,-512", "--json"], capsys)
+    assert spaced[0] == 0 and spaced[2] == ""
+    assert json.loads(spaced[1])["settings"]["gains"] == [-8.0, 64.0, -512.0]
+    assert json.loads(spaced[1])["metrics"] == json.loads(joined[1])["metrics"]
+    code, out, _ = _run(
+        ["certify", "--plant", "paper_experiment", "--gains", "-8,64,-512", "--udot-max", "361e0"],
+        capsys,
+    )
+    assert code == 0 and "gains l = (-8, 64, -512)" in out
+
+
+def test_stage_file_sections_are_defaults_and_said(capsys):
+    """--plant FILE.toml: the file's sections fill the options not given, and say so."""
+    code, out, err = _run(
+        ["simulate", "--plant", str(CONFIG), "--duration", "0.2", "--json"], capsys
+    )
+    assert code == 0 and err == ""
+    doc = json.loads(out)
+    s = doc["settings"]
+    assert s["gains"] == [8.0, 64.0, -512.0] and s["dt"] == 2e-4
+    assert s["controller"]["lambda1"] == 1.0 and doc["reference"]["amplitude"] == 80.0
+    used = doc["defaults_from_file"]["options"]
+    assert used == {
+        "--gains": "[observer]",
+        "--dt": "[sampling]",
+        "--lambda1": "[controller]",
+        "--lambda2": "[controller]",
+        "--reference": "[reference]",
+    }
+    # an option on the command line wins, and is not reported as taken from the file
+    code, out, _ = _run(
+        ["simulate", "--plant", str(CONFIG), "--duration", "0.2", "--lambda1", "3", "--json"],
+        capsys,
+    )
+    doc = json.loads(out)
+    assert doc["settings"]["controller"]["lambda1"] == 3.0
+    assert "--lambda1" not in doc["defaults_from_file"]["options"]
+    code, out, _ = _run(["certify", "--plant", str(CONFIG)], capsys)
+    assert code == 0
+    assert out.splitlines()[0] == (
+        f"from {CONFIG}: --gains ([observer]), --udot-max ([envelope]), --dt ([sampling])"
+    )
+    assert "dt = 0.0002 s" in out
+
+
+# -- item 7: one vocabulary (the text printed around the certificates) ------------
+
+
+def test_error_line_names_the_file_once(tmp_path, capsys):
+    f = tmp_path / "noplant.toml"
+    f.write_text("[observer]\ngains = [1.0, 2.0, 3.0]\n")
+    code, out, err = _run(
+        ["certify", "--plant", str(f), "--gains", "8,64,-512", "--udot-max", "361"], capsys
+    )
+    assert code == 2 and out == ""
+    assert err == f"error: {f}: missing required section [plant]\n"
+
+
+def test_capped_rate_text_matches_the_data(capsys):
+    from bwdesign import certify
+
+    rep = certify(P, (2468.378, 586392.0, -941.6449), udot_max=1e12, dt=2e-4)
+    capped = [c for c in rep.certificates if c.max_udot_capped]
+    assert capped  # the sector tier stops at its search limit here
+    code, out, _ = _run(
+        ["certify", "--plant", "paper_experiment", "--gains", "2468.378,586392,-941.6449"]
+        + ["--udot-max", "1e12", "--dt", "2e-4"],
+        capsys,
+    )
+    assert "the tier may hold for every rate)" not in out  # the old blanket legend
+    for c in capped:
+        line = next(x for x in out.splitlines() if x.startswith(f"  {c.name}: "))
+        if c.holds:
+            assert "may hold for every rate" in line
+        else:
+            assert "does not hold at the requested |u'| <= 1e+12 V/s" in line

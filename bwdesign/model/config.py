@@ -244,7 +244,8 @@ def load_config(path: str | Path) -> StageConfig:
     try:
         return parse_config(data, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
     except BWDesignError as err:
-        raise ConfigError(f"{path}: {err}") from None
+        text = str(err)  # name the file once, whether or not the message already does
+        raise ConfigError(text if text.startswith(f"{path}: ") else f"{path}: {text}") from None
 
 
 def load_plant(name_or_path: str | Path) -> BoucWenParams:
