@@ -432,6 +432,7 @@ def simulate(
         "plant": params.name,
         "true_plant": tp.to_dict() if true_params is not None else None,
         "length_unit": params.length_unit,
+        "input_unit": params.input_unit,
         "reference": reference.to_dict(),
         "observer": kind,
         "gains": None if gains is None else gains.tolist(),
