@@ -158,7 +158,8 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         "--true-plant",
         default=None,
         metavar="NAME_OR_TOML",
-        help="simulate this plant instead of --plant (model mismatch)",
+        help="simulate this plant instead of --plant (model mismatch); of a stage file "
+        "only [plant] is used",
     )
     p.add_argument(
         "--csv",
