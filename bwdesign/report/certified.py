@@ -81,7 +81,9 @@ class ReportOutcome:
     ----------
     out_dir : Path
     certified : bool
-        The configured gains (if any) are certified and synthesis is feasible.
+        The configured gains (if any) are certified, synthesis is feasible and
+        the reference's feedforward input stays within ``[controller]
+        u_min/u_max`` (the exit code of ``bwdesign report`` follows it).
     verdict : str
         The sentence at the top of the report.
     """
@@ -583,7 +585,8 @@ def build_report(
         lrow,
     )
     doc.para(
-        f"Digital tuning, worst case over a {tuning.mismatch} mismatch: gain margin "
+        f"Digital tuning, worst case over the model mismatch {_mismatch_text(tuning.mismatch)}:"
+        " gain margin "
         f"{tuning.worst_gain_margin_db:.3g} dB, phase margin "
         f"{tuning.worst_phase_margin:.3g} deg, delay margin "
         f"{tuning.worst_delay_margin * 1e3:.3g} ms; requirements met: "
@@ -698,6 +701,11 @@ def build_report(
     )
     doc.para(f"Date: {date or datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}")
     return doc, cert_doc, ok, verdict
+
+
+def _mismatch_text(mismatch: dict[str, float]) -> str:
+    """``{'a1': 0.02, 'a3': 0.02}`` -> ``a1 +-2 %, a3 +-2 %`` (no Python repr in the report)."""
+    return ", ".join(f"{k} +-{100 * float(v):g} %" for k, v in mismatch.items())
 
 
 def _pole_text(p: complex) -> str:
