@@ -145,6 +145,17 @@ def test_non_finite_state_is_refused_identically(make):
         obs.batch_filter([0.0], [1.0])
 
 
+@pytest.mark.parametrize(
+    "kw", [dict(u_prev="1.0"), dict(u_prev=True), dict(duration="0.2"), dict(noise_std=None)]
+)
+def test_simulate_refuses_strings_and_booleans(kw):
+    from bwdesign import Sine, simulate
+
+    args = dict(dt=2e-4, duration=0.2, gains=G, lambda1=1.0, lambda2=2.0)
+    with pytest.raises(InputError, match="must be a number"):
+        simulate(P, Sine(amplitude=10, offset=10, frequency=5), **{**args, **kw})
+
+
 def test_ukf_interface_matches_or_says_what_differs():
     obs = _ukf()
     assert obs.gains is None
@@ -194,7 +205,7 @@ def test_ukf_step_has_a_udot_max_path(capsys):
     argv += ["--amplitude", "10", "--observer", "ukf", "--lambda1", "1", "--lambda2", "2"]
     argv += ["--dt", "2e-4", "--duration", "0.2", "--json"]
     code, _, err = _run(argv, capsys)
-    assert code == 2 and "udot_max" in err
+    assert code == 2 and "--udot-max" in err  # the error names the option that fixes it
     code, out, err = _run(argv + ["--udot-max", "400"], capsys)
     assert code == 0 and err == ""
     assert json.loads(out)["settings"]["observer"] == "ukf"
