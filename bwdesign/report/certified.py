@@ -651,7 +651,7 @@ def build_report(
     doc.para(
         "Each run is reproduced exactly by the command below it (`--start-on-reference` sets "
         "the initial state above; the reference and any one-sided input limit come from the "
-        "config file's sections):"
+        "config file's sections; the path is as given to `bwdesign report`):"
     )
     doc.pre("\n".join(f"# {run.label}\n{run.command_text}" for run in runs))
     runs_by_label = {run.label: run.result for run in runs}
