@@ -36,6 +36,7 @@ from .sim.closed_loop import simulate
 from .sim.continuous import simulate_continuous
 from .sim.metrics import Metrics, steady_state_window, tracking_metrics
 from .sim.result import SimulationResult
+from .sim.start import start_on_reference
 
 __all__ = [
     "__version__",
@@ -68,6 +69,7 @@ __all__ = [
     "DiscreteTrackingController",
     "TuningWarning",
     "simulate",
+    "start_on_reference",
     "simulate_continuous",
     "SimulationResult",
     "analyze_loop",

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import NoReturn
+import re
+import sys
+from collections.abc import Sequence
+from typing import Any, NoReturn
 
 from ..errors import BWDesignError
 
@@ -15,11 +18,42 @@ class UsageError(BWDesignError, ValueError):
     """Bad command-line input."""
 
 
+#: A token that is a value, never an option: a negative number or a list of numbers
+#: starting with one (``-8,64,-512``, ``-1e3``, ``-.5``).
+_NEGATIVE_VALUE = re.compile(r"^-(\d|\.\d)")
+
+
+def join_negative_values(argv: Sequence[str]) -> list[str]:
+    """``--opt -8,64,-512`` -> ``--opt=-8,64,-512``, so negative values read as written.
+
+    argparse only takes ``-8`` or ``-0.5`` as a value; ``-8,64,-512`` or
+    ``-1e3`` would be read as an unknown option. No option of bwdesign starts
+    with a digit, so such a token is always the value of the long option before it.
+    """
+    out: list[str] = []
+    for tok in argv:
+        prev = out[-1] if out else ""
+        if (
+            _NEGATIVE_VALUE.match(tok)
+            and prev.startswith("--")
+            and prev != "--"
+            and "=" not in prev
+        ):
+            out[-1] = f"{prev}={tok}"
+        else:
+            out.append(tok)
+    return out
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the package's error convention: one ``error:`` line, exit 2."""
 
     def error(self, message: str) -> NoReturn:
         raise UsageError(f"{self.prog}: {message}")
+
+    def parse_known_args(self, args: Sequence[str] | None = None, namespace: Any = None):
+        argv = sys.argv[1:] if args is None else args
+        return super().parse_known_args(join_negative_values(argv), namespace)
 
 
 def positive_float(text: str) -> float:

@@ -4,6 +4,13 @@ Runs the sampled-data tracking loop of :func:`bwdesign.sim.simulate` and
 prints the steady-state metrics. Exit codes: 0 the loop ran and stayed
 bounded, 1 it diverged (reported, not an error), 2 bad input with one
 ``error:`` line and nothing written.
+
+With ``--plant FILE.toml`` the file's ``[observer]`` gains (PHSO and ESO),
+``[controller]`` lambda1, lambda2, u_min, u_max, ``[sampling]`` dt,
+``[reference]`` (when no reference option is given) and ``[envelope]`` (the
+UKF's ``--udot-max``) are the defaults of the options not given; what was
+taken from the file is printed. An option that does not apply to the run is
+an error.
 """
 
 from __future__ import annotations
@@ -17,10 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from ..model.config import load_plant
-from ..model.references import Sine, Step, Triangle
+from ..model.references import Reference, Sine, Step, Triangle
 from ..output.jsonenc import dump_json
 from ..sim.closed_loop import simulate
 from ..sim.result import SimulationResult
+from ..sim.start import start_on_reference
 from .args import (
     EXIT_NO,
     EXIT_OK,
@@ -31,6 +39,7 @@ from .args import (
     nonneg_float,
     positive_float,
 )
+from .stage import Stage, load_stage
 
 __all__ = ["simulate_args", "run_simulate"]
 
@@ -50,17 +59,24 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--reference",
         choices=("sine", "triangle", "step"),
-        default="sine",
-        help="reference kind (default sine)",
+        default=None,
+        help="reference kind (default sine, or the [reference] of a --plant FILE.toml)",
     )
     p.add_argument(
         "--amplitude",
         type=finite_float,
-        required=True,
+        default=None,
         metavar="A",
-        help="reference amplitude (plant length unit; the step height for a step)",
+        help="reference amplitude (plant length unit; the step height for a step); "
+        "required unless the reference comes from a --plant FILE.toml",
     )
-    p.add_argument("--offset", type=finite_float, default=0.0, metavar="O", help="reference offset")
+    p.add_argument(
+        "--offset",
+        type=finite_float,
+        default=None,
+        metavar="O",
+        help="reference offset (plant length unit, default 0)",
+    )
     p.add_argument(
         "--frequency",
         type=positive_float,
@@ -69,17 +85,17 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         help="reference frequency (Hz; sine and triangle)",
     )
     p.add_argument(
-        "--phase", type=finite_float, default=0.0, metavar="RAD", help="reference phase (rad)"
+        "--phase", type=finite_float, default=None, metavar="RAD", help="reference phase (rad)"
     )
     p.add_argument(
         "--rise-time",
         type=nonneg_float,
-        default=0.0,
+        default=None,
         metavar="S",
         help="step: quintic rise time (s); 0 = sharp step",
     )
     p.add_argument(
-        "--t-step", type=nonneg_float, default=0.0, metavar="S", help="step: time of the step (s)"
+        "--t-step", type=nonneg_float, default=None, metavar="S", help="step: time of the step (s)"
     )
     p.add_argument(
         "--observer", choices=("phso", "eso", "ukf"), default="phso", help="observer (default phso)"
@@ -89,10 +105,19 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         type=gains_triple,
         default=None,
         metavar="l1,l2,l3",
-        help="continuous observer gains (1/s, 1/s^2, 1/s); required for phso and eso",
+        help="continuous observer gains (1/s, 1/s^2, 1/s); required for phso and eso "
+        "(an error for ukf, which has none)",
     )
-    p.add_argument("--lambda1", type=positive_float, required=True, help="eq. (12) lambda1 (1/s)")
-    p.add_argument("--lambda2", type=positive_float, required=True, help="eq. (12) lambda2 (1/s)")
+    p.add_argument(
+        "--udot-max",
+        type=positive_float,
+        default=None,
+        metavar="V",
+        help="ukf: input-rate envelope for its process noise (input unit/s); default derived "
+        "from a periodic reference (margin 1.1) or the [envelope] of a --plant FILE.toml",
+    )
+    p.add_argument("--lambda1", type=positive_float, default=None, help="eq. (12) lambda1 (1/s)")
+    p.add_argument("--lambda2", type=positive_float, default=None, help="eq. (12) lambda2 (1/s)")
     p.add_argument(
         "--form",
         choices=("continuous", "discrete"),
@@ -106,7 +131,7 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         metavar="RATE",
         help="integral action of the discrete form (1/s)",
     )
-    p.add_argument("--dt", type=positive_float, required=True, help="sample time (s)")
+    p.add_argument("--dt", type=positive_float, default=None, help="sample time (s)")
     p.add_argument("--duration", type=positive_float, required=True, help="run length (s)")
     p.add_argument(
         "--noise-std",
@@ -117,13 +142,24 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--seed", type=_int, default=0, metavar="N", help="noise seed (default 0)")
     p.add_argument("--delay", action="store_true", help="one-sample computation delay")
-    p.add_argument("--u-min", type=finite_float, default=None, metavar="V", help="input limit")
-    p.add_argument("--u-max", type=finite_float, default=None, metavar="V", help="input limit")
+    p.add_argument(
+        "--start-on-reference",
+        action="store_true",
+        help="start plant and estimate at (x_d(0), x_d'(0), 0) with the feedforward input "
+        "held before t = 0 (as the report's runs do; default: from rest, u = 0)",
+    )
+    p.add_argument(
+        "--u-min", type=finite_float, default=None, metavar="V", help="input limit (input unit)"
+    )
+    p.add_argument(
+        "--u-max", type=finite_float, default=None, metavar="V", help="input limit (input unit)"
+    )
     p.add_argument(
         "--true-plant",
         default=None,
         metavar="NAME_OR_TOML",
-        help="simulate this plant instead of --plant (model mismatch)",
+        help="simulate this plant instead of --plant (model mismatch); of a stage file "
+        "only [plant] is used",
     )
     p.add_argument(
         "--csv",
@@ -133,8 +169,34 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _reference(args: argparse.Namespace):
+_REFERENCE_OPTIONS = (
+    "reference",
+    "amplitude",
+    "offset",
+    "frequency",
+    "phase",
+    "rise_time",
+    "t_step",
+)
+
+
+def _reference(args: argparse.Namespace, stage: Stage) -> Reference:
+    given = [o for o in _REFERENCE_OPTIONS if getattr(args, o) is not None]
+    if not given and stage.config is not None and stage.config.reference is not None:
+        stage.used["--reference"] = "[reference]"
+        return stage.config.reference
+    if args.amplitude is None:
+        raise UsageError(
+            "--amplitude is required (or a --plant FILE.toml with a [reference] section and "
+            "no reference option)"
+        )
+    args.reference = args.reference or "sine"
+    args.offset = 0.0 if args.offset is None else args.offset
     if args.reference == "step":
+        if args.phase is not None:
+            raise UsageError("--phase does not apply to a step reference")
+        args.rise_time = args.rise_time or 0.0
+        args.t_step = args.t_step or 0.0
         if args.frequency is not None:
             raise UsageError("--frequency does not apply to a step reference")
         return Step(
@@ -145,8 +207,9 @@ def _reference(args: argparse.Namespace):
         )
     if args.frequency is None:
         raise UsageError(f"a {args.reference} reference needs --frequency (Hz)")
-    if args.rise_time or args.t_step:
+    if args.rise_time is not None or args.t_step is not None:
         raise UsageError("--rise-time and --t-step apply to a step reference only")
+    args.phase = 0.0 if args.phase is None else args.phase
     cls = Sine if args.reference == "sine" else Triangle
     return cls(
         amplitude=args.amplitude, offset=args.offset, frequency=args.frequency, phase=args.phase
@@ -182,11 +245,26 @@ def _write_csv(result: SimulationResult, target: Path) -> None:
 
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``bwdesign simulate``; returns the exit code."""
-    params = load_plant(args.plant)
+    stage = load_stage(args.plant)
+    params = stage.params
     true_params = load_plant(args.true_plant) if args.true_plant else None
-    reference = _reference(args)
+    _file_defaults(args, stage)
+    reference = _reference(args, stage)
+    if args.observer == "ukf" and args.gains is not None:
+        raise UsageError(
+            "--gains does not apply to --observer ukf (the UKF has no gains; its noise model "
+            "is set by --udot-max and --noise-std)"
+        )
+    if args.observer != "ukf" and args.udot_max is not None:
+        raise UsageError("--udot-max applies to --observer ukf only (the UKF's process noise)")
     if args.observer in ("phso", "eso") and args.gains is None:
         raise UsageError(f"--observer {args.observer} needs --gains l1,l2,l3")
+    for opt in ("lambda1", "lambda2", "dt", "duration"):
+        if getattr(args, opt) is None:
+            raise UsageError(
+                f"--{opt.replace('_', '-')} is required"
+                + ("" if opt == "duration" else " (or a --plant FILE.toml that sets it)")
+            )
     n = args.duration / args.dt
     if n < 2:
         raise UsageError(f"--duration {args.duration:g} s holds fewer than 2 samples of --dt")
@@ -194,12 +272,13 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise UsageError(
             f"--duration/--dt = {n:.3g} samples exceeds the limit of {MAX_SAMPLES:.0e}"
         )
-    if (args.u_min is None) != (args.u_max is None):
+    if (args.u_min is None) != (args.u_max is None) and not _limits_from_file(stage):
         raise UsageError("give both --u-min and --u-max, or neither")
-    u_limits = None if args.u_min is None else (args.u_min, args.u_max)
+    u_limits = _u_limits(args.u_min, args.u_max)
     if args.integral_rate is not None and args.form != "discrete":
         raise UsageError("--integral-rate needs --form discrete")
     target = _check_csv_target(args.csv) if args.csv else None
+    start = start_on_reference(params, reference) if args.start_on_reference else {}
     result = simulate(
         params,
         reference,
@@ -216,7 +295,9 @@ def run_simulate(args: argparse.Namespace) -> int:
         noise_std=args.noise_std,
         seed=args.seed,
         delay=args.delay,
+        udot_max=args.udot_max,
         allow_unbounded=args.allow_unbounded,
+        **start,
     )
     if target is not None:
         _write_csv(result, target)
@@ -225,14 +306,49 @@ def run_simulate(args: argparse.Namespace) -> int:
     doc["reference"] = reference.to_dict()
     doc["observer"] = args.observer
     doc["csv"] = str(target) if target else None
+    doc["start"] = "on reference" if args.start_on_reference else "rest"
+    doc["defaults_from_file"] = stage.to_dict()
     if args.json:
         print(dump_json(doc))
     else:
-        _print(result, params.length_unit, reference.describe(), args)
+        if stage.note() is not None:
+            print(stage.note())
+        _print(result, params, reference.describe(), args)
     return EXIT_OK if result.stable else EXIT_NO
 
 
-def _print(result: SimulationResult, lu: str, ref_text: str, args: argparse.Namespace) -> None:
+def _file_defaults(args: argparse.Namespace, stage: Stage) -> None:
+    """Options not given on the command line, from the sections of a --plant FILE.toml."""
+    cfg = stage.config
+    if cfg is None:
+        return
+    if args.observer in ("phso", "eso"):
+        args.gains = stage.default(args, "gains", "[observer]", cfg.gains)
+    args.dt = stage.default(args, "dt", "[sampling]", cfg.dt)
+    ctl = cfg.controller
+    if ctl is not None:
+        for opt in ("lambda1", "lambda2"):
+            setattr(args, opt, stage.default(args, opt, "[controller]", getattr(ctl, opt)))
+        if args.u_min is None and args.u_max is None:
+            args.u_min = stage.default(args, "u_min", "[controller]", ctl.u_min)
+            args.u_max = stage.default(args, "u_max", "[controller]", ctl.u_max)
+    if args.observer == "ukf" and args.udot_max is None and cfg.envelope_spec is not None:
+        env = cfg.envelope(allow_unbounded=args.allow_unbounded)
+        args.udot_max = stage.default(args, "udot_max", "[envelope]", env.udot_max)
+
+
+def _limits_from_file(stage: Stage) -> bool:
+    return "--u-min" in stage.used or "--u-max" in stage.used
+
+
+def _u_limits(lo: float | None, hi: float | None) -> tuple[float, float] | None:
+    if lo is None and hi is None:
+        return None
+    return (-math.inf if lo is None else lo, math.inf if hi is None else hi)
+
+
+def _print(result: SimulationResult, params, ref_text: str, args: argparse.Namespace) -> None:
+    lu, iu = params.length_unit, params.input_unit
     s = result.settings
     print(
         f"plant: {s['plant'] or '(unnamed)'}" + (" (true plant differs)" if s["true_plant"] else "")
@@ -243,6 +359,17 @@ def _print(result: SimulationResult, lu: str, ref_text: str, args: argparse.Name
         f"lambda1 = {args.lambda1:g}, lambda2 = {args.lambda2:g} 1/s, dt = {args.dt:g} s"
         + (", one-sample delay" if args.delay else "")
     )
+    if args.start_on_reference:
+        x0 = ", ".join(f"{v:.6g}" for v in s["x0"])
+        print(
+            f"start: on the reference, x0 = xhat0 = ({x0}), u held before t = 0: "
+            f"{s['u_prev']:.6g} {iu}"
+        )
+    else:
+        print(f"start: from rest, x0 = xhat0 = (0, 0, 0), u = 0 {iu} before t = 0")
+    if result.settings.get("u_limits"):
+        lo, hi = result.settings["u_limits"]
+        print(f"input limits: {lo:g} .. {hi:g} {iu}")
     if args.noise_std:
         print(f"noise: std {args.noise_std:g} {lu}, seed {args.seed}")
     if not result.stable:
@@ -256,5 +383,5 @@ def _print(result: SimulationResult, lu: str, ref_text: str, args: argparse.Name
     print(f"  RMSE = {m.rmse:.6g} {lu}")
     e1, e2, e3 = result.estimation_rmse
     print(f"estimation RMSE: x1 {e1:.4g} {lu}, x2 {e2:.4g} {lu}/s, x3 {e3:.4g} {lu}")
-    if not math.isclose(result.saturated_fraction, 0.0):
+    if s.get("u_limits"):
         print(f"input saturated {100 * result.saturated_fraction:.3g} % of the time")

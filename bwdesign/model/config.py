@@ -3,15 +3,18 @@
 One file per stage; only ``[plant]`` is required::
 
     [plant]        name, then a1, a2, a3, alpha, beta, gamma
-                   or the physical m, b, k, d, alpha0, beta, gamma
+                   or the physical m, b, k, d, alpha0, beta, gamma;
+                   optional length_unit (default "um") and input_unit (default "V")
     [observer]     gains = [l1, l2, l3]   (continuous-time, 1/s, 1/s^2, 1/s)
-    [controller]   lambda1, lambda2, optional u_min, u_max (V)
+    [controller]   lambda1, lambda2, optional u_min, u_max (input unit)
     [sampling]     dt (s)
-    [envelope]     udot_max (V/s), or from_reference = true with optional margin >= 1
+    [envelope]     udot_max (input unit/s), or from_reference = true with optional margin >= 1
     [reference]    kind = "sine" | "triangle" | "step", amplitude, offset, frequency, ...
     [synthesis]    decay (1/s) and pole_radius (rad/s) asked of the gain synthesis in reports
 
-Unknown sections and keys are errors that name the allowed ones.
+Unknown sections and keys are errors that name the allowed ones. Numbers are in
+the plant's units: length_unit for x1, x3 and the reference, input_unit for u
+and input_unit/s for rates; nothing is converted.
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ _SECTIONS = {
 
 @dataclass(frozen=True, kw_only=True)
 class ControllerSettings:
-    """Eq. (12) constants and optional amplifier limits (V)."""
+    """Eq. (12) constants (1/s) and optional amplifier limits (the plant's input unit)."""
 
     lambda1: float
     lambda2: float
@@ -195,7 +198,9 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
                 raise ConfigError(
                     "[envelope]: give either udot_max or from_reference (with margin), not both"
                 )
-            env["udot_max"] = _num(env["udot_max"], "[envelope] udot_max (V/s)", positive=True)
+            env["udot_max"] = _num(
+                env["udot_max"], "[envelope] udot_max (input unit/s)", positive=True
+            )
         elif env.get("from_reference") is True:
             if reference is None:
                 raise ConfigError("[envelope]: from_reference = true needs a [reference] section")
@@ -205,7 +210,8 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
                     raise ConfigError(f"[envelope] margin must be >= 1, got {env['margin']:g}")
         else:
             raise ConfigError(
-                "[envelope]: give udot_max (V/s, a positive number) or from_reference = true"
+                "[envelope]: give udot_max (input unit/s, a positive number) or "
+                "from_reference = true"
             )
 
     synthesis = None
@@ -256,7 +262,8 @@ def load_config(path: str | Path) -> StageConfig:
     try:
         return parse_config(data, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
     except BWDesignError as err:
-        raise ConfigError(f"{path}: {err}") from None
+        text = str(err)  # name the file once, whether or not the message already does
+        raise ConfigError(text if text.startswith(f"{path}: ") else f"{path}: {text}") from None
 
 
 def load_plant(name_or_path: str | Path) -> BoucWenParams:

@@ -131,7 +131,14 @@ def feedforward_input(
         def resid(v, uk=uk, hk=hk, Rk=R[k]):
             return a3 * v - a1 * hysteresis_increment(params, hk, uk, v) - Rk
 
-        u_new = brentq(resid, lo, hi, xtol=1e-13 * (1 + abs(hi)), rtol=1e-14)
+        try:
+            u_new = brentq(resid, lo, hi, xtol=1e-13 * (1 + abs(hi)), rtol=1e-14)
+        except ValueError:  # no sign change: only outside the bounded class (no h_max)
+            raise InputError(
+                f"the exact inverse model has no input at t = {t[k]:.6g} s within the "
+                f"hysteresis bound {B:.6g} (this parameter set is outside the bounded class); "
+                "state the envelope directly ([envelope] udot_max)"
+            ) from None
         h_new = hysteresis_increment(params, h_k, u_k, u_new)
         rate = math.nan
         for s in (1.0, -1.0):

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -196,7 +197,7 @@ def discretize(params: BoucWenParams, dt: float) -> ZOHModel:
 
 
 def _check_dt(dt: float) -> float:
-    if isinstance(dt, bool) or not isinstance(dt, int | float | np.floating):
+    if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
         raise InputError(f"dt must be a number of seconds, got {dt!r}")
     dt = float(dt)
     if not math.isfinite(dt) or dt <= 0:

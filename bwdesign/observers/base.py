@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any
 
 import numpy as np
@@ -15,20 +16,59 @@ from .gains import C, _as_gains, check_gains, discrete_gains
 
 
 def _finite_scalar(v: Any, name: str) -> float:
-    """``v`` as a finite float; a size-1 array (filterpy's ``z`` of shape (1,)) is accepted."""
-    if isinstance(v, float | int) and not isinstance(v, bool):
+    """``v`` as a finite float.
+
+    Accepted: any ``numbers.Real`` (python and numpy integers and floats) and a
+    numeric array of size 1 (filterpy's ``z`` of shape (1,)). Refused with
+    :class:`InputError`: ``None``, booleans, strings and anything else, so that
+    ``predict(None)``, ``update(True)`` or ``predict("1.0")`` never run.
+    """
+    if isinstance(v, bool | np.bool_):
+        raise InputError(f"{name} must be a number, got the boolean {v!r}")
+    if isinstance(v, numbers.Real):
         f = float(v)
-    else:
-        try:
-            a = np.asarray(v, dtype=float)
-        except (TypeError, ValueError):
-            raise InputError(f"{name} must be a number, got {v!r}") from None
+    elif isinstance(v, np.ndarray | list | tuple):
+        a = np.asarray(v)
+        if a.dtype.kind not in "fiu":
+            raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
         if a.size != 1:
             raise InputError(f"{name} must be a single number, got shape {a.shape}")
         f = float(a.reshape(()))
+    else:
+        raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
     if not math.isfinite(f):
         raise InputError(f"{name} must be finite, got {f}")
     return f
+
+
+def _state(value: Any, name: str = "x") -> np.ndarray:
+    """A state as a new float array of shape (3,); (3,) and filterpy's (3, 1) are accepted."""
+    a = np.asarray(value)
+    if a.dtype.kind not in "fiu" or a.shape not in ((3,), (3, 1)):
+        raise InputError(
+            f"{name} must be three finite numbers, shape (3,) or (3, 1), got "
+            f"{type(value).__name__} {value!r}"
+        )
+    x = a.astype(float).reshape(3)
+    if not np.all(np.isfinite(x)):
+        raise InputError(f"{name} must be finite, got {x.tolist()}")
+    return x
+
+
+def _require_finite_state(x: Any, owner: str) -> None:
+    """Refuse to step from a non-finite estimate (e.g. ``obs.x[0] = nan`` in place)."""
+    if not np.all(np.isfinite(x)):
+        raise InputError(
+            f"{owner}: the estimate x = {np.asarray(x).tolist()} is not finite; reset() it"
+        )
+
+
+def _check_params(params: Any, owner: str) -> None:
+    if not isinstance(params, BoucWenParams):
+        hint = " (a preset name? use bwdesign.preset(name))" if isinstance(params, str) else ""
+        raise InputError(
+            f"{owner}: params must be a BoucWenParams{hint}, got {type(params).__name__} {params!r}"
+        )
 
 
 def _measurements(zs: Any, n: int) -> list[float | None]:
@@ -46,15 +86,25 @@ def _measurements(zs: Any, n: int) -> list[float | None]:
                 f"z must be finite, got zs[{k}] = {z[k]} (use None for a missing sample)"
             )
         return z.astype(float).tolist()
+    if isinstance(zs, str | bytes) or not hasattr(zs, "__len__"):
+        raise InputError(
+            f"zs must be a sequence of measurements (None for a missing sample), one per "
+            f"input, got {type(zs).__name__} {zs!r}"
+        )
     if len(zs) != n:
         raise InputError(f"zs and us must have the same length, got {len(zs)} and {n}")
     return [None if z is None else _finite_scalar(z, "z") for z in zs]
 
 
 def _inputs(us: Any) -> list[float]:
-    u = np.asarray(us, dtype=float)
+    u = np.asarray(us)
+    if u.dtype.kind not in "fiu":
+        raise InputError(
+            f"us must be a 1-D sequence of numbers (held inputs), got {type(us).__name__} {us!r}"
+        )
+    u = u.astype(float)
     if u.ndim != 1:
-        raise InputError(f"us must be a 1-D sequence of held inputs (V), got shape {u.shape}")
+        raise InputError(f"us must be a 1-D sequence of held inputs, got shape {u.shape}")
     if not np.all(np.isfinite(u)):
         k = int(np.flatnonzero(~np.isfinite(u))[0])
         raise InputError(f"u must be finite, got us[{k}] = {u[k]}")
@@ -101,6 +151,7 @@ class _SampledObserver:
         u_prev: float = 0.0,
         allow_unbounded: bool = False,
     ) -> None:
+        _check_params(params, type(self).__name__)
         require_bounded(params, allow_unbounded)
         self.params = params
         self.dt = _check_dt(dt)
@@ -129,15 +180,26 @@ class _SampledObserver:
 
     def reset(self, x0: Any = None, *, u_prev: float = 0.0) -> None:
         """Restart from ``x0`` (default zeros) with ``u_prev`` (V) held before the first sample."""
-        x = np.zeros(3) if x0 is None else np.array(x0, dtype=float)
-        if x.shape != (3,) or not np.all(np.isfinite(x)):
-            raise InputError(f"x0 must be a finite vector of shape (3,), got {x0!r}")
-        self.x = x
+        x = np.zeros(3) if x0 is None else _state(x0, "x0")
+        self._x = x
         self.x_prior = x.copy()
         self.x_post = x.copy()
         self.u_prev = _finite_scalar(u_prev, "u_prev")
         self.y = 0.0
         self.z: float | None = None
+
+    @property
+    def x(self) -> np.ndarray:
+        """Current estimate, shape (3,).
+
+        Assigning accepts three finite numbers of shape (3,) or filterpy's (3, 1)
+        (stored as (3,)); anything else raises :class:`InputError`.
+        """
+        return self._x
+
+    @x.setter
+    def x(self, value: Any) -> None:
+        self._x = _state(value, "x")
 
     def predict(self, u: float) -> None:
         """Carry the estimate from ``t_k`` to ``t_{k+1}`` with ``u`` (V) held.
@@ -146,7 +208,9 @@ class _SampledObserver:
         in closed form; then the linear part is propagated exactly (ZOH).
         """
         u = _finite_scalar(u, "u")
-        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        x1, x2, x3 = self._x.tolist()
+        if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
+            _require_finite_state(self._x, type(self).__name__)
         if self._hysteresis:
             x3 = hysteresis_increment(self.params, x3, self.u_prev, u)
         f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
@@ -155,7 +219,7 @@ class _SampledObserver:
             f21 * x1 + f22 * x2 + f23 * x3 + g2 * u,
             x3,
         )
-        self.x = np.array(prior)
+        self._x = np.array(prior)
         self.x_prior = np.array(prior)
         self.u_prev = u
 
@@ -170,16 +234,18 @@ class _SampledObserver:
         if z is None:
             self.z = None
             self.y = 0.0
-            self.x_post = np.array(self.x, dtype=float)
+            self.x_post = self._x.copy()
             return
         z = _finite_scalar(z, "z")
-        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        x1, x2, x3 = self._x.tolist()
+        if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
+            _require_finite_state(self._x, type(self).__name__)
         k1, k2, k3 = self.K.tolist()
         r = z - x1
         post = (x1 + k1 * r, x2 + k2 * r, x3 + k3 * r)
         self.z = z
         self.y = r
-        self.x = np.array(post)
+        self._x = np.array(post)
         self.x_post = np.array(post)
 
     def batch_filter(self, zs: Any, us: Any) -> np.ndarray:
@@ -206,7 +272,9 @@ class _SampledObserver:
             return np.empty((0, 3))
         f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
         k1, k2, k3 = self.K.tolist()
-        x1, x2, x3 = np.asarray(self.x, dtype=float).tolist()
+        x1, x2, x3 = self._x.tolist()
+        if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
+            _require_finite_state(self._x, type(self).__name__)
         up = self.u_prev
         params, hyst = self.params, self._hysteresis
         out = []
@@ -227,7 +295,7 @@ class _SampledObserver:
         res = np.array(out)
         self.x_prior = np.array(prior)
         self.y = 0.0 if zl[-1] is None else zl[-1] - prior[0]
-        self.x, self.x_post, self.u_prev, self.z = res[-1].copy(), res[-1].copy(), up, zl[-1]
+        self._x, self.x_post, self.u_prev, self.z = res[-1].copy(), res[-1].copy(), up, zl[-1]
         return res
 
     def as_iosystem(self, name: str | None = None):

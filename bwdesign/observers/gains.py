@@ -19,9 +19,13 @@ C = np.array([1.0, 0.0, 0.0])
 
 def _as_gains(gains: Any, what: str = "gains") -> np.ndarray:
     try:
-        g = np.asarray(gains, dtype=float)
+        g = np.asarray(gains)
     except (TypeError, ValueError):
         raise GainError(f"{what} must be three numbers (l1, l2, l3), got {gains!r}") from None
+    bools = isinstance(gains, list | tuple) and any(isinstance(v, bool | np.bool_) for v in gains)
+    if g.dtype.kind not in "fiu" or bools:  # strings, booleans, None
+        raise GainError(f"{what} must be three numbers (l1, l2, l3), got {gains!r}")
+    g = g.astype(float)
     if g.shape != (3,):
         raise GainError(f"{what} must be three numbers (l1, l2, l3), got shape {g.shape}")
     if not np.all(np.isfinite(g)):

@@ -36,14 +36,22 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import _check_dt, discretize, zoh_step
-from .base import _finite_scalar, _inputs, _measurements
+from .base import (
+    _check_params,
+    _finite_scalar,
+    _inputs,
+    _measurements,
+    _require_finite_state,
+    _state,
+)
 
 __all__ = ["UnscentedObserver", "default_noise", "max_hysteresis_slope"]
 
@@ -97,8 +105,8 @@ def default_noise(
 
 
 def _positive(v: Any, name: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, int | float | np.floating):
-        raise InputError(f"{name} must be a number, got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
     v = float(v)
     if not math.isfinite(v) or v <= 0:
         raise InputError(f"{name} must be a finite number > 0, got {v}")
@@ -196,6 +204,7 @@ class UnscentedObserver:
         # filterpy pulls in scipy.stats (~0.4 s): imported here, not with bwdesign
         from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
+        _check_params(params, "UnscentedObserver")
         require_bounded(params, allow_unbounded)
         self.params = params
         self.dt = _check_dt(dt)
@@ -211,8 +220,8 @@ class UnscentedObserver:
                 udot_max=1.0 if udot_max is None else udot_max,
                 noise_std=noise_std,
             )
-        self.udot_max = None if udot_max is None else float(udot_max)
-        self.noise_std = float(noise_std)
+        self.udot_max = None if udot_max is None else _positive(udot_max, "udot_max (V/s)")
+        self.noise_std = _positive(noise_std, "noise_std (length unit)")
         if points is None:
             points = MerweScaledSigmaPoints(3, alpha=1.0, beta=2.0, kappa=0.0)
         self.ukf = UnscentedKalmanFilter(
@@ -231,9 +240,7 @@ class UnscentedObserver:
     # -- state -------------------------------------------------------------
     def reset(self, x0: Any = None, *, u_prev: float = 0.0, P0: Any = None) -> None:
         """Restart from ``x0`` (default zeros) and ``P0`` (default: the constructor's)."""
-        x = np.zeros(3) if x0 is None else np.array(x0, dtype=float)
-        if x.shape != (3,) or not np.all(np.isfinite(x)):
-            raise InputError(f"x0 must be a finite vector of shape (3,), got {x0!r}")
+        x = np.zeros(3) if x0 is None else _state(x0, "x0")
         P = self._P0 if P0 is None else _matrix(P0, (3, 3), "P0")
         f = self.ukf
         f.x, f.P = x, P.copy()
@@ -250,7 +257,7 @@ class UnscentedObserver:
 
     @x.setter
     def x(self, value: Any) -> None:
-        self.ukf.x = np.asarray(value, dtype=float)
+        self.ukf.x = _state(value, "x")
 
     @property
     def P(self) -> np.ndarray:
@@ -279,6 +286,34 @@ class UnscentedObserver:
     def P_post(self) -> np.ndarray:
         return self.ukf.P_post
 
+    #: The UKF has no fixed observer gains (see :attr:`K`).
+    gains = None
+
+    @property
+    def K(self) -> np.ndarray:
+        """Kalman gain of the last ``update``, shape (3,): it changes at every sample.
+
+        Unlike the PHSO/ESO's fixed ``K``, this is filterpy's ``ukf.K[:, 0]``
+        (zeros before the first update).
+        """
+        return np.array(self.ukf.K, dtype=float).reshape(3)
+
+    def as_iosystem(self, name: str | None = None):
+        """Not available: the UKF has no continuous-time form.
+
+        Raises
+        ------
+        GainError
+            Always; build a :class:`~bwdesign.observers.HysteresisObserver` or
+            :class:`~bwdesign.observers.ExtendedStateObserver` from continuous
+            gains for a python-control system.
+        """
+        raise GainError(
+            "UnscentedObserver has no continuous form (its gain changes every sample): "
+            "as_iosystem() exists only for HysteresisObserver and ExtendedStateObserver "
+            "built from continuous gains"
+        )
+
     @property
     def Q(self) -> np.ndarray:
         """Process noise covariance (3, 3)."""
@@ -293,6 +328,7 @@ class UnscentedObserver:
     def predict(self, u: float) -> None:
         """Propagate the sigma points one sample with ``u`` (V) held (exact plant step)."""
         u = _finite_scalar(u, "u")
+        _require_finite_state(self.ukf.x, "UnscentedObserver")
         self.ukf.predict(u_prev=self.u_prev, u=u)
         self.u_prev = u
 
@@ -303,6 +339,7 @@ class UnscentedObserver:
             self.z, self.y = None, 0.0
             return
         z = _finite_scalar(z, "z")
+        _require_finite_state(self.ukf.x, "UnscentedObserver")
         self.ukf.update(np.array([z]))
         self.z, self.y = z, float(self.ukf.y[0])
 
@@ -325,6 +362,8 @@ class UnscentedObserver:
         zl = _measurements(zs, len(ul))
         out = np.empty((len(ul), 3))
         f = self.ukf
+        if ul:
+            _require_finite_state(f.x, "UnscentedObserver")
         up = self.u_prev
         for k, (uk, zk) in enumerate(zip(ul, zl, strict=True)):
             f.predict(u_prev=up, u=uk)

@@ -181,6 +181,11 @@ __all__ += [
 ]
 
 
+def _input_unit(result: Any) -> str:
+    """The input unit a simulation result records (``settings["input_unit"]``, default V)."""
+    return getattr(result, "settings", {}).get("input_unit", "V")
+
+
 def _track_color(label: str) -> Any:
     for key, c in _COLORS.items():
         if key != "true" and key in label.upper():
@@ -225,7 +230,7 @@ def plot_simulation(result: Any, *, title: str = "", t_range: tuple[float, float
             fontsize=9,
         )
     a[2].plot(t[sel], result.u[sel], color="tab:green", lw=0.8)
-    a[2].set_ylabel("u (V)")
+    a[2].set_ylabel(f"u ({_input_unit(result)})")
     for i, name in enumerate(("x1", "x2", "x3")):
         d = result.xhat[sel, i] - result.x[sel, i]
         scale = float(np.max(np.abs(d))) or 1.0
@@ -293,7 +298,7 @@ def plot_tracking_comparison(
     a[0].legend(loc="best", fontsize=8)
     a[1].legend(loc="best", fontsize=8)
     if show_input:
-        a[2].set_ylabel("control input u (V)")
+        a[2].set_ylabel(f"control input u ({_input_unit(first)})")
     a[-1].set_xlabel("t (s)")
     for tag, ax in zip("abc", a, strict=False):
         ax.grid(True, alpha=0.3)
@@ -353,7 +358,7 @@ def plot_peaking(
             axes[2, col].semilogy(t[s], err, color=c, lw=0.8, label=label)
         axes[0, col].set_title(head, fontsize=10)
         axes[0, col].set_ylabel(f"x1, x_d ({lu})")
-        axes[1, col].set_ylabel("u (V)")
+        axes[1, col].set_ylabel(f"u ({_input_unit(next(iter(runs.values()), None))})")
         axes[2, col].set_ylabel(f"|x3hat - x3| ({lu})")
         axes[2, col].set_xlabel("t (s)")
         for ax in axes[:, col]:
@@ -481,7 +486,12 @@ def plot_error_poles(poles: dict[str, np.ndarray], *, title: str = ""):
 
 
 def plot_hysteresis_bode(
-    bodes: dict[str, Any], *, lipschitz_coeff: float, udot_max: float, title: str = ""
+    bodes: dict[str, Any],
+    *,
+    lipschitz_coeff: float,
+    udot_max: float,
+    title: str = "",
+    input_unit: str = "V",
 ):
     """Bode magnitude from the hysteresis error to eps3, with the lipschitz bound 1/L.
 
@@ -489,9 +499,9 @@ def plot_hysteresis_bode(
     ----------
     bodes : dict of str to bwdesign.certify.linear.HysteresisBode
     lipschitz_coeff : float
-        ``|beta| + |gamma|`` (1/V).
+        ``|beta| + |gamma|`` (1/input unit).
     udot_max : float
-        Envelope (V/s); the line ``1/L`` with ``L = lipschitz_coeff * udot_max``
+        Envelope (input unit/s); the line ``1/L`` with ``L = lipschitz_coeff * udot_max``
         is what the peak must stay below for the lipschitz tier.
 
     Returns
@@ -505,7 +515,8 @@ def plot_hysteresis_bode(
         ax.loglog(b.omega, b.magnitude, lw=1.2, label=f"{label} (peak {b.peak:.3g} s)")
         ax.plot([b.omega_peak], [b.peak], marker="o", ms=5, color=ax.lines[-1].get_color())
     bound = 1.0 / (lipschitz_coeff * udot_max)
-    ax.axhline(bound, color="tab:red", ls="--", lw=1.0, label=f"1/L at |u'| = {udot_max:.4g} V/s")
+    label = f"1/L at |u'| = {udot_max:.4g} {input_unit}/s"
+    ax.axhline(bound, color="tab:red", ls="--", lw=1.0, label=label)
     ax.set_xlabel("omega (rad/s)")
     ax.set_ylabel("|e3' (j omega I - A)^-1 e3| (s)")
     ax.grid(True, which="both", alpha=0.3)

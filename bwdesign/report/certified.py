@@ -23,7 +23,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
-from itertools import product
 from pathlib import Path
 from typing import Any
 
@@ -40,10 +39,10 @@ from ..model.config import StageConfig
 from ..model.envelope import Envelope
 from ..model.params import require_bounded
 from ..model.summary import plant_summary
-from ..observers.gains import discrete_gains
+from ..observers.gains import check_gains, discrete_gains
 from ..output.jsonenc import dump_json
-from ..sim.closed_loop import simulate
 from .document import Document
+from .tracking import TrackingRun, input_limits, required_input, tracking_runs
 
 __all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DECAY"]
 
@@ -82,7 +81,9 @@ class ReportOutcome:
     ----------
     out_dir : Path
     certified : bool
-        The configured gains (if any) are certified and synthesis is feasible.
+        The configured gains (if any) are certified, synthesis is feasible and
+        the reference's feedforward input stays within ``[controller]
+        u_min/u_max`` (the exit code of ``bwdesign report`` follows it).
     verdict : str
         The sentence at the top of the report.
     """
@@ -92,7 +93,7 @@ class ReportOutcome:
     verdict: str
 
 
-def _require(config: StageConfig) -> tuple[float, Envelope]:
+def _require(config: StageConfig, *, allow_unbounded: bool = False) -> tuple[float, Envelope]:
     missing = []
     if config.dt is None:
         missing.append("[sampling] (dt)")
@@ -106,7 +107,7 @@ def _require(config: StageConfig) -> tuple[float, Envelope]:
         raise ConfigError(
             f"{config.source or 'config'}: the report needs section(s) {', '.join(missing)}"
         )
-    env = config.envelope()
+    env = config.envelope(allow_unbounded=allow_unbounded)
     return float(config.dt), env
 
 
@@ -131,14 +132,21 @@ def certificate_document(
     """
     params = config.plant
     require_bounded(params, allow_unbounded)
-    dt, env = _require(config)
+    dt, env = _require(config, allow_unbounded=allow_unbounded)
     v = env.udot_max
     configured = None
     if config.gains is not None:
-        configured = certify(params, config.gains, udot_max=v, dt=dt)
+        configured = certify(
+            params, config.gains, udot_max=v, dt=dt, allow_unbounded=allow_unbounded
+        )
     req = _synthesis_request(config)
     synth = synthesize(
-        params, udot_max=v, decay=req["decay"], pole_radius=req["pole_radius"], dt=dt
+        params,
+        udot_max=v,
+        decay=req["decay"],
+        pole_radius=req["pole_radius"],
+        dt=dt,
+        allow_unbounded=allow_unbounded,
     )
     firmware: dict[str, Any] = {
         "dt": dt,
@@ -172,8 +180,40 @@ def certificate_document(
             )
         },
         "firmware": firmware,
+        "input": _input_document(config, env, allow_unbounded),
+        "units": _units(params),
     }
     return doc, configured, synth
+
+
+def _units(params: Any) -> dict[str, Any]:
+    """The units of the numbers in ``certificate.json`` (from the stage's length/input unit)."""
+    iu = params.input_unit
+    return {
+        "length": params.length_unit,
+        "input": iu,
+        "udot_max": f"{iu}/s",
+        "max_udot": f"{iu}/s",
+        "decay": "1/s",
+        "decay_rate": "1/s",
+        "gains": ["1/s", "1/s^2", "1/s"],
+        "dt": "s",
+        "pole_radius": "rad/s",
+    }
+
+
+def _input_document(config: StageConfig, env: Envelope, allow_unbounded: bool) -> dict[str, Any]:
+    """Input limits, the feedforward input the reference needs, and whether it fits."""
+    limits = input_limits(config)
+    need = required_input(config, env, allow_unbounded=allow_unbounded)
+    within = None
+    if limits is not None and need is not None:
+        within = bool(limits[0] <= need[0] and need[1] <= limits[1])
+    return {
+        "limits": None if limits is None else list(limits),
+        "feedforward_range": None if need is None else list(need),
+        "within_limits": within,
+    }
 
 
 def _fmt(x: Any, digits: int = 4) -> str:
@@ -233,31 +273,79 @@ def _tier_cell(rep: CertificateReport | None, name: str) -> list[str]:
 
 
 def _verdict(
-    config: StageConfig, configured: CertificateReport | None, synth: SynthesisResult, v: float
+    config: StageConfig,
+    configured: CertificateReport | None,
+    synth: SynthesisResult,
+    v: float,
+    inp: dict[str, Any],
+    runs: list[TrackingRun],
 ) -> tuple[bool, str]:
+    """The sentence at the top and the flag behind the exit code.
+
+    Not certified, infeasible synthesis, or a reference whose feedforward input
+    leaves ``[controller] u_min/u_max`` each make the flag False (exit 1).
+    """
+    iu = config.plant.input_unit
     parts = []
     ok = True
+    fits = inp["within_limits"] is not False
     if configured is not None:
-        if configured.certified:
+        if configured.certified and fits:
             parts.append(
                 f"CERTIFIED: the configured gains {_gains_text(config.gains)} hold at "
-                f"|u'| <= {v:.4g} V/s (strongest tier: {configured.best})."
+                f"|u'| <= {v:.4g} {iu}/s (strongest tier: {configured.best})."
+            )
+        elif configured.certified:
+            parts.append(
+                f"OBSERVER CERTIFIED, REFERENCE OUT OF INPUT LIMITS: the configured gains "
+                f"{_gains_text(config.gains)} hold at |u'| <= {v:.4g} {iu}/s (strongest tier: "
+                f"{configured.best})."
             )
         else:
             ok = False
             parts.append(
                 f"NOT CERTIFIED: no tier certifies the configured gains "
-                f"{_gains_text(config.gains)} at |u'| <= {v:.4g} V/s."
+                f"{_gains_text(config.gains)} at |u'| <= {v:.4g} {iu}/s."
             )
     if configured is None:
         parts.append("No observer gains configured ([observer] gains); synthesis only.")
     if synth.feasible:
-        where = "at the same envelope" if configured is not None else f"at |u'| <= {v:.4g} V/s"
-        parts.append(f"Synthesised gains certified {where}: {synth.reason}.")
+        where = "at the same envelope" if configured is not None else f"at |u'| <= {v:.4g} {iu}/s"
+        parts.append(
+            f"Synthesised gains certified {where}: l = {_gains_text(synth.gains)}, "
+            f"{synth.tier} tier, |u'| <= {synth.udot_max:.6g} {iu}/s, decay >= "
+            f"{synth.decay:g} 1/s, poles within {synth.pole_radius:.6g} rad/s."
+        )
     else:
         ok = False
         parts.append(f"SYNTHESIS INFEASIBLE: {synth.reason}.")
+    sat = [r.result.saturated_fraction for r in runs if r.result.settings.get("u_limits")]
+    sat_text = (
+        f"the simulated loops saturate {100 * min(sat):.3g} to {100 * max(sat):.3g} % of the time"
+        if sat
+        else ""
+    )
+    if not fits:
+        ok = False
+        (lo, hi), (a, b) = inp["limits"], inp["feedforward_range"]
+        parts.append(
+            ("" if configured is not None and configured.certified else "INPUT OUT OF LIMITS: ")
+            + f"The reference needs the feedforward input {a:.4g} .. "
+            f"{b:.4g} {iu}, outside the input limits {_fmt(lo)} .. {_fmt(hi)} {iu} "
+            f"([controller] u_min/u_max); {sat_text}, so the tracking numbers below are for a "
+            "saturated loop and the stage cannot follow this reference. What holds: the "
+            "observer certificates, for an applied (clipped) input with |u'| within the "
+            "envelope; the envelope itself was derived from the unclipped feedforward."
+        )
+    elif sat and max(sat) > 0:
+        parts.append(f"Input limits {_limits_text(inp['limits'], iu)}: {sat_text}.")
     return ok, " ".join(parts)
+
+
+def _limits_text(limits: Any, iu: str) -> str:
+    if limits is None:
+        return "none"
+    return f"{_fmt(limits[0])} .. {_fmt(limits[1])} {iu}"
 
 
 def _progress(quiet: bool) -> Callable[[str], None]:
@@ -284,15 +372,23 @@ def build_report(
 
     say = _progress(quiet)
     params = config.plant
-    lu = params.length_unit
+    lu, iu = params.length_unit, params.input_unit
+    # every check that can end in an `error:` line comes before the first progress line
+    require_bounded(params, allow_unbounded)
+    dt, env = _require(config, allow_unbounded=allow_unbounded)
+    if config.gains is not None:
+        check_gains(params, config.gains)
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
 
     say("certifying the configured gains and synthesising a certified set")
     cert_doc, configured, synth = certificate_document(config, allow_unbounded=allow_unbounded)
-    dt, env = _require(config)
     v = env.udot_max
-    ok, verdict = _verdict(config, configured, synth, v)
+    g_loop = config.gains if config.gains is not None else synth.gains
+    tuning = digital_tuning(params, dt)
+    say("simulating the tracking loop at the envelope (PHSO and ESO)")
+    runs = tracking_runs(config, gains=g_loop, tuning=tuning, allow_unbounded=allow_unbounded)
+    ok, verdict = _verdict(config, configured, synth, v, cert_doc["input"], runs)
 
     doc = Document(f"Certified-gains report: {params.name or Path(config.source).stem}")
     doc.callout(verdict)
@@ -307,10 +403,10 @@ def build_report(
     units = {
         "a1": "1/s^2",
         "a2": "1/s",
-        "a3": f"{lu}/(V s^2)",
-        "alpha": f"{lu}/V",
-        "beta": "1/V",
-        "gamma": "1/V",
+        "a3": f"{lu}/({iu} s^2)",
+        "alpha": f"{lu}/{iu}",
+        "beta": f"1/{iu}",
+        "gamma": f"1/{iu}",
     }
     rows = [[k, f"{getattr(params, k):.8g}", u] for k, u in units.items()]
     if params.physical is not None:
@@ -331,43 +427,61 @@ def build_report(
     # -- envelope ------------------------------------------------------------
     doc.heading("Operating envelope")
     erows = [
-        ["|u'| bound used by the certificates", f"{v:.6g} V/s"],
+        ["|u'| bound used by the certificates", f"{v:.6g} {iu}/s"],
         ["sample time dt", f"{dt * 1e3:.6g} ms"],
         ["source", env.source],
     ]
     if env.derived is not None:
         erows += [
             ["reference", config.reference.describe()],
-            ["exact-inverse max |u'|", f"{env.derived:.6g} V/s"],
-            ["leading order (a1/a3) max |x_d'|", f"{env.leading_order:.6g} V/s"],
+            ["exact-inverse max |u'|", f"{env.derived:.6g} {iu}/s"],
+            ["leading order (a1/a3) max |x_d'|", f"{env.leading_order:.6g} {iu}/s"],
             ["margin", f"{env.margin:g}"],
-            ["feedforward input range", f"{env.u_range[0]:.4g} .. {env.u_range[1]:.4g} V"],
         ]
+    inp = cert_doc["input"]
+    need = inp["feedforward_range"]
+    erows += [
+        [
+            "feedforward input range (exact inverse)",
+            "-" if need is None else f"{need[0]:.4g} .. {need[1]:.4g} {iu}",
+        ],
+        ["input limits ([controller] u_min, u_max)", _limits_text(inp["limits"], iu)],
+        [
+            "feedforward within the limits",
+            "-" if inp["within_limits"] is None else _fmt(inp["within_limits"]),
+        ],
+    ]
     doc.table(["item", "value"], erows)
     doc.para(
         f"How: {env.method}. Per sample the certificates bound the input jump by "
-        f"|u'| dt = {v * dt:.4g} V."
+        f"|u'| dt = {v * dt:.4g} {iu}."
     )
 
     # -- certificates ----------------------------------------------------------
     doc.heading("Certificates")
     req = _synthesis_request(config)
+    c_decay = 0.0 if configured is None else configured.decay
+    s_decay = synth.report.decay if synth.report is not None else req["decay"]
     doc.para(
         f"Configured gains l = {_gains_text(config.gains)}; synthesised gains "
         f"l = {_gains_text(synth.gains)} (discrete K = {_gains_text(synth.discrete_gains)}), "
         f"from an LMI synthesis for the {synth.tier} tier asking decay >= {req['decay']:g} 1/s"
         f" within pole radius {synth.pole_radius:.5g} rad/s. Envelope = the largest |u'| "
-        "(V/s) the tier certifies for those gains; decay = certified exponential rate "
-        "(1/s) at the envelope above; check = the smallest slack of the eigenvalue checks "
-        "made outside the solver (scaled, > 0 passes)."
+        f"({iu}/s) the tier certifies for those gains with at least the decay named in the "
+        "column head; decay = certified exponential rate (1/s) at the envelope above; "
+        "check = the smallest slack of the eigenvalue checks made outside the solver "
+        "(scaled, > 0 passes). The two sets are certified at different required decays "
+        f"(configured: >= {c_decay:g} 1/s; synthesised: >= {s_decay:g} 1/s, the synthesis "
+        "request), so their envelopes answer different questions: a larger required decay "
+        "certifies a smaller envelope."
     )
     header = [
         "tier",
-        "configured: holds",
+        f"configured (decay >= {c_decay:g} 1/s): holds",
         "envelope",
         "decay",
         "check",
-        "synthesised: holds",
+        f"synthesised (decay >= {s_decay:g} 1/s): holds",
         "envelope",
         "decay",
         "check",
@@ -410,7 +524,7 @@ def build_report(
     plotting.save_figure(fig, figs / "error_poles.png")
     doc.figure("figures/error_poles.png", "Observer error poles at both ends of the sector")
     fig, _ = plotting.plot_hysteresis_bode(
-        bodes, lipschitz_coeff=abs(params.beta) + abs(params.gamma), udot_max=v
+        bodes, lipschitz_coeff=abs(params.beta) + abs(params.gamma), udot_max=v, input_unit=iu
     )
     plotting.save_figure(fig, figs / "hysteresis_bode.png")
     doc.figure(
@@ -421,20 +535,19 @@ def build_report(
     doc.para(
         "; ".join(
             f"{k}: H-infinity peak {b.peak:.4g} s at {b.omega_peak:.4g} rad/s, "
-            f"lipschitz envelope {b.lipschitz_envelope:.4g} V/s"
+            f"lipschitz envelope at decay 0: {b.lipschitz_envelope:.4g} {iu}/s"
             for k, b in bodes.items()
         )
-        + "."
+        + f". These are decay-0 bounds: the certificate table's synthesised column asks decay "
+        f">= {s_decay:g} 1/s, which certifies a smaller envelope."
     )
 
     # -- tracking loop -------------------------------------------------------
     say("tracking-loop analysis (continuous, sampled, digital tuning)")
     ctl = config.controller
     doc.heading("Tracking loop")
-    g_loop = config.gains if config.gains is not None else synth.gains
     cont = analyze_loop(params, ctl.lambda1, ctl.lambda2, g_loop)
     samp = analyze_loop(params, ctl.lambda1, ctl.lambda2, g_loop, dt=dt)
-    tuning = digital_tuning(params, dt)
     lrow = []
     for label, a in (
         ("eq. 12, continuous", cont),
@@ -472,7 +585,8 @@ def build_report(
         lrow,
     )
     doc.para(
-        f"Digital tuning, worst case over a {tuning.mismatch} mismatch: gain margin "
+        f"Digital tuning, worst case over the model mismatch {_mismatch_text(tuning.mismatch)}:"
+        " gain margin "
         f"{tuning.worst_gain_margin_db:.3g} dB, phase margin "
         f"{tuning.worst_phase_margin:.3g} deg, delay margin "
         f"{tuning.worst_delay_margin * 1e3:.3g} ms; requirements met: "
@@ -486,73 +600,78 @@ def build_report(
     doc.figure("figures/loop_poles.png", "Closed-loop poles of the sampled tracking loops")
 
     # -- simulation ----------------------------------------------------------
-    say("simulating the tracking loop at the envelope (PHSO and ESO)")
     doc.heading("Simulated tracking at the envelope")
     ref = config.reference
-    duration = 3.0 * ref.period if ref.period is not None else 1.0
-    xd0, vd0, ad0 = (float(np.asarray(a)) for a in ref.evaluate(0.0))
-    start = dict(
-        x0=[xd0, vd0, 0.0],
-        xhat0=[xd0, vd0, 0.0],
-        u_prev=(ad0 + params.a2 * vd0 + params.a1 * xd0) / params.a3,
-    )
-    laws = {
-        "eq. 12": dict(gains=g_loop, lambda1=ctl.lambda1, lambda2=ctl.lambda2),
-        "digital tuning": dict(
-            gains=tuning.gains,
-            lambda1=tuning.lambda1,
-            lambda2=tuning.lambda2,
-            form="discrete",
-            integral_rate=tuning.integral_rate,
-        ),
-    }
-    runs = {}
+    first = runs[0].result
+    x0 = ", ".join(f"{x:.6g}" for x in first.settings["x0"])
     srow = []
-    for (law, kw), observer in product(laws.items(), ("phso", "eso")):
-        label = f"{observer.upper()} ({law})"
-        kw = dict(kw, observer=observer)
-        r = simulate(params, ref, dt=dt, duration=duration, u_limits=_limits(ctl), **start, **kw)
-        runs[label] = r
+    for run in runs:
+        r = run.result
+        sat = _fmt(100 * r.saturated_fraction, 3) if r.settings.get("u_limits") else "no limits"
         if r.metrics is None:
-            srow.append([label, "unstable", "-", "-", "-", "-", "-"])
+            srow.append([run.label, "unstable", "-", "-", "-", "-", "-", sat])
             continue
         er = r.estimation_rmse
         srow.append(
             [
-                label,
+                run.label,
                 _fmt(r.metrics.maxe),
                 _fmt(r.metrics.me),
                 _fmt(r.metrics.rmse),
                 _fmt(er[0], 3),
                 _fmt(er[1], 3),
                 _fmt(er[2], 3),
+                sat,
             ]
         )
-    w = next(iter(runs.values())).window
+    w = first.window
     doc.para(
-        f"Reference {ref.describe()}, dt = {dt * 1e3:g} ms, {duration:g} s from rest, "
-        f"nominal plant, no noise. Metrics over the last two periods "
-        f"({w[0]:g} .. {w[1]:g} s), in {lu}; estimation RMSE per state."
+        f"Reference {ref.describe()}, dt = {dt * 1e3:g} ms, {first.settings['duration']:g} s "
+        f"starting on the reference: plant state and estimate x0 = ({x0}) "
+        f"({lu}, {lu}/s, {lu}), i.e. (x_d(0), x_d'(0), 0), with the feedforward input "
+        f"{first.settings['u_prev']:.6g} {iu} held before t = 0; nominal plant, no noise; "
+        f"input limits {_limits_text(cert_doc['input']['limits'], iu)}. Metrics over the last "
+        f"two periods ({w[0]:g} .. {w[1]:g} s), in {lu}; estimation RMSE per state; "
+        "saturated = share of samples at an input limit."
     )
     doc.table(
-        ["loop", f"MAXE ({lu})", f"ME ({lu})", f"RMSE ({lu})", "RMSE x1", "RMSE x2", "RMSE x3"],
+        [
+            "loop",
+            f"MAXE ({lu})",
+            f"ME ({lu})",
+            f"RMSE ({lu})",
+            "RMSE x1",
+            "RMSE x2",
+            "RMSE x3",
+            "saturated (%)",
+        ],
         srow,
         id="tracking",
     )
-    fig, _ = plotting.plot_tracking_comparison(runs, title="tracking at the envelope")
+    doc.para(
+        "Each run is reproduced exactly by the command below it (`--start-on-reference` sets "
+        "the initial state above; the reference and any one-sided input limit come from the "
+        "config file's sections; the path is as given to `bwdesign report`):"
+    )
+    doc.pre("\n".join(f"# {run.label}\n{run.command_text}" for run in runs))
+    runs_by_label = {run.label: run.result for run in runs}
+    fig, _ = plotting.plot_tracking_comparison(runs_by_label, title="tracking at the envelope")
     plotting.save_figure(fig, figs / "tracking.png")
     doc.figure("figures/tracking.png", "Tracking, error and input over the metrics window")
     curves = {}
-    for label, r in runs.items():
+    for label, r in runs_by_label.items():
         if r.stable:
             err = np.asarray(r.xhat) - np.asarray(r.x)
             for i in range(3):
                 curves[f"x{i + 1} | {label}"] = (np.asarray(r.t), err[:, i])
-    fig, _ = plotting.plot_estimation_errors(
-        curves, title="estimation errors in the loop", ylabel=f"|x_hat - x| ({lu}, {lu}/s)"
-    )
-    plotting.save_figure(fig, figs / "estimation_errors.png")
-    doc.figure("figures/estimation_errors.png", "Estimation error of each state in the loop")
+    if curves:
+        fig, _ = plotting.plot_estimation_errors(
+            curves, title="estimation errors in the loop", ylabel=f"|x_hat - x| ({lu}, {lu}/s)"
+        )
+        plotting.save_figure(fig, figs / "estimation_errors.png")
+        doc.figure("figures/estimation_errors.png", "Estimation error of each state in the loop")
+    else:
+        doc.para("No run stayed bounded, so there is no estimation-error figure.")
 
     # -- firmware ------------------------------------------------------------
     doc.heading("Gains for firmware")
@@ -584,19 +703,15 @@ def build_report(
     return doc, cert_doc, ok, verdict
 
 
+def _mismatch_text(mismatch: dict[str, float]) -> str:
+    """``{'a1': 0.02, 'a3': 0.02}`` -> ``a1 +-2 %, a3 +-2 %`` (no Python repr in the report)."""
+    return ", ".join(f"{k} +-{100 * float(v):g} %" for k, v in mismatch.items())
+
+
 def _pole_text(p: complex) -> str:
     if abs(p.imag) < 1e-9 * max(1.0, abs(p)):
         return f"{p.real:.4g}"
     return f"{p.real:.4g}{p.imag:+.4g}j"
-
-
-def _limits(ctl: Any) -> tuple[float, float] | None:
-    if ctl.u_min is None and ctl.u_max is None:
-        return None
-    return (
-        -math.inf if ctl.u_min is None else ctl.u_min,
-        math.inf if ctl.u_max is None else ctl.u_max,
-    )
 
 
 def write_report(

@@ -50,6 +50,7 @@ from .closed_loop import make_observer, simulate
 from .continuous import simulate_continuous
 from .metrics import Metrics, steady_state_window, tracking_metrics
 from .result import SimulationResult
+from .start import start_on_reference
 
 __all__ = [
     "Metrics",
@@ -59,4 +60,5 @@ __all__ = [
     "simulate",
     "make_observer",
     "simulate_continuous",
+    "start_on_reference",
 ]

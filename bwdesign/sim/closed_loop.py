@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import math
+import numbers
 import warnings
 from typing import Any
 
@@ -26,10 +27,9 @@ __all__ = ["simulate", "make_observer"]
 
 
 def _finite_nonneg(value: Any, name: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"{name} must be a number, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InputError(f"{name} must be a number, got {type(value).__name__} {value!r}")
+    v = float(value)
     if not math.isfinite(v) or v < 0:
         raise InputError(f"{name} must be a finite number >= 0, got {v}")
     return v
@@ -116,8 +116,9 @@ def _ukf(params, dt, *, x0, u_prev, noise_std, udot_max, allow_unbounded):
 
     if udot_max is None:
         raise InputError(
-            "the UKF needs the input-rate envelope udot_max (V/s); give udot_max or a "
-            "periodic reference to derive it from"
+            f"the UKF needs the input-rate envelope udot_max ({params.input_unit}/s): give "
+            "udot_max (--udot-max on the command line), or a periodic reference or a step "
+            "with a rise time to derive it from"
         )
     return UnscentedObserver(
         params,
@@ -362,6 +363,8 @@ def simulate(
         raise InputError(f"seed must be an integer, got {seed!r}")
     x0 = _state(x0, "x0")
     xhat0 = _state(xhat0, "xhat0")
+    if isinstance(u_prev, bool) or not isinstance(u_prev, numbers.Real):
+        raise InputError(f"u_prev must be a number, got {type(u_prev).__name__} {u_prev!r}")
     u_prev = float(u_prev)
     if not math.isfinite(u_prev):
         raise InputError(f"u_prev must be finite, got {u_prev}")
@@ -432,6 +435,7 @@ def simulate(
         "plant": params.name,
         "true_plant": tp.to_dict() if true_params is not None else None,
         "length_unit": params.length_unit,
+        "input_unit": params.input_unit,
         "reference": reference.to_dict(),
         "observer": kind,
         "gains": None if gains is None else gains.tolist(),

@@ -341,6 +341,7 @@ def simulate_continuous(
         "plant": params.name,
         "true_plant": tp.to_dict() if true_params is not None else None,
         "length_unit": params.length_unit,
+        "input_unit": params.input_unit,
         "reference": reference.to_dict(),
         "observer": observer,
         "gains": l.tolist(),

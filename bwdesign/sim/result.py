@@ -77,6 +77,10 @@ class SimulationResult:
         return self.settings.get("length_unit", "um")
 
     @property
+    def input_unit(self) -> str:
+        return self.settings.get("input_unit", "V")
+
+    @property
     def saturated_fraction(self) -> float:
         """Fraction of samples at a ``u_limits`` bound (0 without limits)."""
         lim = self.settings.get("u_limits")
@@ -93,6 +97,7 @@ class SimulationResult:
             "stable": self.stable,
             "status": self.status,
             "length_unit": lu,
+            "input_unit": self.input_unit,
             "metrics": None
             if self.metrics is None
             else {"maxe": self.metrics.maxe, "me": self.metrics.me, "rmse": self.metrics.rmse},

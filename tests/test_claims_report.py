@@ -1,0 +1,225 @@
+"""Issue 19, the report's claims: unbounded stages, reproducible runs, saturation, units.
+
+Each test here failed on the commit the issue was filed against (16f545d).
+"""
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+from bwdesign.cli.main import main
+from bwdesign.control.tuning import digital_tuning
+from bwdesign.errors import UnboundedModelError
+from bwdesign.model.config import load_config
+from bwdesign.report.certified import build_report, certificate_document
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / "configs" / "paper_experiment.toml"
+TEXT = CONFIG.read_text()
+DATE = "2000-01-01 00:00 UTC"
+
+
+def _config(tmp_path, name, text):
+    f = tmp_path / name
+    f.write_text(text)
+    return f
+
+
+def tracking_runs(config, **kw):
+    """The report's runs (imported here: the module is new, the other tests run without it)."""
+    from bwdesign.report.tracking import tracking_runs as runs
+
+    return runs(config, **kw)
+
+
+def _fmt4(x):
+    return f"{float(x):.4g}"
+
+
+# -- item 2: report --allow-unbounded reaches certify and synthesize ----------------
+
+UNBOUNDED = TEXT.replace("beta = 0.3762", "beta = -1.3567").replace(
+    "from_reference = true\nmargin = 1.1", "udot_max = 400.0"
+)
+
+
+def test_report_allow_unbounded_is_passed_through(tmp_path, capsys):
+    cfg = _config(tmp_path, "unbounded.toml", UNBOUNDED)
+    config = load_config(cfg)
+    with pytest.raises(UnboundedModelError):
+        certificate_document(config)
+    out = tmp_path / "out"
+    assert main(["report", "--config", str(cfg), "--out", str(out), "--quiet"]) == 2
+    _, err = capsys.readouterr()
+    assert "--allow-unbounded" in err and not out.exists()
+    code = main(["report", "--config", str(cfg), "--out", str(out), "--quiet", "--allow-unbounded"])
+    assert code in (0, 1) and (out / "report.md").is_file()
+
+
+# -- item 3: the report says what it simulated, and each run can be rerun -----------
+
+
+@pytest.fixture(scope="module")
+def paper_report(tmp_path_factory):
+    out = tmp_path_factory.mktemp("paper")
+    config = load_config(CONFIG)
+    doc, cert, ok, verdict = build_report(config, out, quiet=True, date=DATE)
+    runs = tracking_runs(config, gains=config.gains, tuning=digital_tuning(config.plant, config.dt))
+    return doc.to_markdown(), cert, runs
+
+
+def test_report_states_the_initial_state(paper_report):
+    md, _, runs = paper_report
+    assert "from rest" not in md
+    s = runs[0].result.settings
+    assert s["x0"] == s["xhat0"] == [100.0, pytest.approx(502.6548245743669, rel=1e-15), 0.0]
+    assert "starting on the reference: plant state and estimate x0 = (100, 502.655, 0)" in md
+    assert f"feedforward input {s['u_prev']:.6g} V held before t = 0" in md
+
+
+def test_report_commands_reproduce_its_runs(paper_report, capsys):
+    md, _, runs = paper_report
+    assert len(runs) == 4
+    for run in runs:
+        assert run.command_text in md, run.label
+        r = run.result
+        row = f"| {run.label} | {_fmt4(r.metrics.maxe)} | {_fmt4(r.metrics.me)} |"
+        assert row in md, run.label
+        assert main(list(run.command) + ["--json"]) == 0
+        out, err = capsys.readouterr()
+        assert err == ""
+        got = json.loads(out)
+        assert got["start"] == "on reference"
+        for k in ("maxe", "me", "rmse"):
+            assert got["metrics"][k] == pytest.approx(getattr(r.metrics, k), rel=1e-9, abs=1e-12)
+        assert got["estimation_rmse"]["x3"] == pytest.approx(r.estimation_rmse[2], abs=1e-9)
+
+
+def test_simulate_from_rest_is_the_default_and_said(capsys):
+    argv = ["simulate", "--plant", str(CONFIG), "--duration", "0.2"]
+    assert main(argv) == 0
+    out, _ = capsys.readouterr()
+    assert "start: from rest, x0 = xhat0 = (0, 0, 0), u = 0 V before t = 0" in out
+    assert main(argv + ["--start-on-reference"]) == 0
+    out, _ = capsys.readouterr()
+    assert "start: on the reference, x0 = xhat0 = (100, 502.655, 0)" in out
+
+
+# -- items 4 and 5: input limits, saturation and units -------------------------------
+# One report serves both: a stage in mV (item 5) whose limits 0 .. 10 mV the
+# reference's feedforward input leaves (item 4).
+
+MILLIVOLT = (
+    TEXT.replace('input_unit = "V"', 'input_unit = "mV"')
+    if 'input_unit = "V"' in TEXT
+    else TEXT.replace('name = "paper_experiment"', 'name = "paper_experiment"\ninput_unit = "mV"')
+)
+SATURATING = MILLIVOLT.replace("lambda2 = 2.0", "lambda2 = 2.0\nu_min = 0.0\nu_max = 10.0")
+
+
+@pytest.fixture(scope="module")
+def saturating_report(tmp_path_factory):
+    base = tmp_path_factory.mktemp("sat")
+    cfg = _config(base, "sat.toml", SATURATING)
+    out = base / "out"
+    code = main(["report", "--config", str(cfg), "--out", str(out), "--quiet"])
+    md = (out / "report.md").read_text()
+    cert = json.loads((out / "certificate.json").read_text())
+    return cfg, code, md, cert
+
+
+def test_saturation_qualifies_the_verdict_and_exit_code(saturating_report):
+    cfg, code, md, cert = saturating_report
+    assert code == 1
+    top = md.splitlines()[2]
+    assert not top.startswith("> **CERTIFIED")
+    assert top.startswith("> **OBSERVER CERTIFIED, REFERENCE OUT OF INPUT LIMITS")
+    inp = cert["input"]
+    assert inp["limits"] == [0.0, 10.0] and inp["within_limits"] is False
+    lo, hi = inp["feedforward_range"]
+    assert hi > 10.0
+    assert f"feedforward input {lo:.4g} .. {hi:.4g} mV, outside the input limits 0 .. 10 mV" in top
+    assert "| input limits ([controller] u_min, u_max) | 0 .. 10 mV |" in md
+    config = load_config(cfg)
+    runs = tracking_runs(config, gains=config.gains, tuning=digital_tuning(config.plant, config.dt))
+    sat = [100 * run.result.saturated_fraction for run in runs]
+    assert f"saturate {min(sat):.3g} to {max(sat):.3g} % of the time" in top
+    for run, pct in zip(runs, sat, strict=True):
+        assert pct > 50
+        assert re.search(rf"\| {re.escape(run.label)} \|.*\| {pct:.3g} \|", md), run.label
+        assert "--u-min 0.0 --u-max 10.0" in run.command_text
+
+
+def test_units_follow_the_stage(saturating_report, capsys):
+    cfg, _, md, cert = saturating_report
+    for pattern in (r"(?<![m\w])V/s", r"/V\b", r"\(V s\^2\)", r"\d V\b"):
+        assert not re.search(pattern, md), pattern
+    assert "um/(mV s^2)" in md and "396.9 mV/s" in md
+    assert cert["units"]["input"] == "mV" and cert["units"]["udot_max"] == "mV/s"
+    capsys.readouterr()
+    assert main(["certify", "--plant", str(cfg), "--udot-max", "100", "--json"]) == 0
+    assert json.loads(capsys.readouterr()[0])["units"]["udot_max"] == "mV/s"
+    assert main(["certify", "--plant", str(cfg), "--udot-max", "100"]) == 0
+    text, _ = capsys.readouterr()
+    assert "max |u_dot| (mV/s)" in text and "<= 100 mV/s" in text
+    assert main(["simulate", "--plant", str(cfg), "--duration", "0.2", "--json"]) == 0
+    assert json.loads(capsys.readouterr()[0])["input_unit"] == "mV"
+
+
+def test_plots_label_the_input_unit():
+    from bwdesign import Sine, simulate
+    from bwdesign.model.params import preset
+    from bwdesign.plotting import figures
+
+    p = preset("paper_experiment")
+    mv = type(p)(
+        **{
+            **{k: getattr(p, k) for k in ("a1", "a2", "a3", "alpha", "beta", "gamma")},
+            "input_unit": "mV",
+        }
+    )
+    r = simulate(
+        mv,
+        Sine(amplitude=10, offset=10, frequency=5),
+        dt=2e-4,
+        duration=0.2,
+        gains=(8, 64, -512),
+        lambda1=1,
+        lambda2=2,
+    )
+    _, axes = figures.plot_tracking_comparison({"PHSO": r})
+    assert axes[2, 0].get_ylabel() == "control input u (mV)"
+    _, axes = r.plot()
+    assert axes[2, 0].get_ylabel() == "u (mV)"
+
+
+# -- item 7: the certificate table and stderr --------------------------------------
+
+
+def test_certificate_table_labels_both_decays(paper_report):
+    md, cert, _ = paper_report
+    c, s = cert["configured"]["decay"], cert["synthesized"]["decay"]
+    assert c != s  # the two sets are certified at different required decays ...
+    header = next(line for line in md.splitlines() if line.startswith("| tier |"))
+    assert f"configured (decay >= {c:g} 1/s): holds" in header  # ... and the table says so
+    assert f"synthesised (decay >= {s:g} 1/s): holds" in header
+    assert "lipschitz envelope at decay 0:" in md
+
+
+@pytest.mark.parametrize(
+    "label, text, allow",
+    [
+        ("unbounded", TEXT.replace("beta = 0.3762", "beta = -1.3567"), False),
+        ("bad gains", TEXT.replace("-512.0]", "512.0]"), False),
+    ],
+)
+def test_report_exit_2_prints_only_the_error_line(tmp_path, capsys, label, text, allow):
+    cfg = _config(tmp_path, "bad.toml", text)
+    out = tmp_path / "out"
+    argv = ["report", "--config", str(cfg), "--out", str(out)]  # progress lines on
+    assert main(argv + (["--allow-unbounded"] if allow else [])) == 2
+    stdout, err = capsys.readouterr()
+    assert stdout == ""
+    assert len(err.splitlines()) == 1 and err.startswith("error: "), err
