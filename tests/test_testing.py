@@ -107,8 +107,11 @@ def test_check_bad_input(tmp_path, capsys, label, old, new, message):
     assert err[-1].startswith("error:") and re.search(message, err[-1]), err[-1]
 
 
-def test_check_without_requirements_is_bad_input(capsys):
-    assert main(["check", "paper_experiment"]) == 2
+def test_check_without_requirements_is_bad_input(tmp_path, capsys):
+    text = STAGE.read_text()
+    bare = tmp_path / "bare.toml"
+    bare.write_text(text[: text.index("[requirements]")])
+    assert main(["check", str(bare)]) == 2
     assert "no [requirements] section" in capsys.readouterr().err
 
 
@@ -154,3 +157,10 @@ def test_example_repository_passes_and_fails_readably(tmp_path):
     # the plugin's item reads as a sentence, the helper's message as a table
     assert "stage.toml: gains are certified: some tier needed at |u'| <= 396.9" in bad.stdout
     assert "FAILED tests/test_stage.py::test_gains_are_certified_by_the_sampled_tier" in bad.stdout
+
+
+def test_bundled_stages_meet_their_requirements(capsys):
+    files = sorted(str(p) for p in (ROOT / "configs").glob("*.toml"))
+    assert main(["check", *files]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert len(out) == 14 and all(line.startswith("PASS  ") for line in out)

@@ -13,6 +13,7 @@
     observer = "phso"            # "phso" | "eso"
     noise_std_um = 0.0           # sensor noise std, seeded
     duration_s = 3.0             # default: three reference periods, at least 1 s
+    start = "reference"          # as the report's runs; or "rest" (zero state and input)
 
 Checked by ``bwdesign check`` and :mod:`bwdesign.testing`. Every key is
 optional; unknown keys and wrong types are :class:`~bwdesign.errors.ConfigError`.
@@ -41,6 +42,7 @@ SETTING_KEYS: dict[str, tuple[type, str]] = {
     "observer": (str, '"phso" or "eso"'),
     "noise_std_um": (float, "sensor noise std (um), >= 0"),
     "duration_s": (float, "simulated time (s), > 0"),
+    "start": (str, '"reference" (as the report: on the reference at t = 0) or "rest"'),
 }
 
 
@@ -76,7 +78,11 @@ def parse_requirements(table: Any) -> dict[str, Any]:
                 raise ConfigError(f"[requirements] duration_s must be > 0, got {value!r}")
             out[key] = v
         else:
-            if value not in ("phso", "eso"):
-                raise ConfigError(f'[requirements] observer must be "phso" or "eso", got {value!r}')
+            choices = ("phso", "eso") if key == "observer" else ("reference", "rest")
+            if value not in choices:
+                raise ConfigError(
+                    f"[requirements] {key} must be one of {', '.join(map(repr, choices))}, "
+                    f"got {value!r}"
+                )
             out[key] = value
     return out

@@ -135,11 +135,13 @@ def assert_tracks(
     mismatch: Mapping[str, float] | None = None,
     observer: str = "phso",
     duration: float | None = None,
+    start: str = "reference",
 ) -> list[Check]:
     """The stage's loop tracks its ``[reference]`` within ``max_me`` (and ``max_maxe``), um.
 
     ``mismatch``: relative parameter errors of the simulated plant (``{"a1": 0.02}``);
     without it, the worst over the ``[uncertainty]`` corners when the stage has them.
+    ``start``: ``"reference"`` (as the report's runs) or ``"rest"``.
     """
     __tracebackhide__ = True
     config = as_stage(stage)
@@ -151,6 +153,7 @@ def assert_tracks(
         mismatch=mismatch,
         observer=observer,
         duration=duration,
+        start=start,
     )
     return _raise_if_failed(f"{checks[0].stage}: tracking out of bounds", checks)
 
