@@ -17,6 +17,7 @@ from .errors import (
     ConfigError,
     GainError,
     InputError,
+    OutputError,
     ParameterError,
     SolverError,
     UnboundedModelError,
@@ -88,4 +89,5 @@ __all__ = [
     "hysteresis_bode",
     "ErrorDynamics",
     "HysteresisBode",
+    "OutputError",
 ]

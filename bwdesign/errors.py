@@ -15,6 +15,7 @@ __all__ = [
     "GainError",
     "InputError",
     "SolverError",
+    "OutputError",
 ]
 
 
@@ -58,3 +59,12 @@ class InputError(BWDesignError, ValueError):
 
 class SolverError(BWDesignError, RuntimeError):
     """A convex solver failed; the result is *not* a certificate."""
+
+
+class OutputError(BWDesignError, ValueError):
+    """An output path cannot be written safely (wrong kind, foreign files, no permission).
+
+    Raised by :mod:`bwdesign.output.files` before any work is done when the
+    target is refused, or at write time when the operating system refuses
+    (disk full, permission); in both cases no user file was changed.
+    """

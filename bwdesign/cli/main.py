@@ -42,7 +42,18 @@ def _lazy(module: str, name: str) -> Callable[..., Any]:
 
 def _report_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, metavar="FILE.toml", help="stage configuration")
-    p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced)")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="report directory: new, empty, or a report bwdesign wrote (its files are "
+        "replaced); never the current directory",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a directory holding other files (they are kept, never overwritten)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--allow-unbounded",
@@ -53,10 +64,16 @@ def _report_args(p: argparse.ArgumentParser) -> None:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from ..model.config import load_config
+    from ..output.files import prepare_directory
     from ..report.certified import write_report
 
+    prepare_directory(args.out, command="report", force=args.force, what="--out")
     outcome = write_report(
-        load_config(args.config), args.out, quiet=args.quiet, allow_unbounded=args.allow_unbounded
+        load_config(args.config),
+        args.out,
+        quiet=args.quiet,
+        allow_unbounded=args.allow_unbounded,
+        force=args.force,
     )
     print(f"{outcome.out_dir}/report.md: {outcome.verdict}")
     return EXIT_OK if outcome.certified else EXIT_NO

@@ -20,12 +20,15 @@ import hashlib
 import math
 import tomllib
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 from typing import Any
 
-from ..errors import BWDesignError, ConfigError, ParameterError
+from ..errors import BWDesignError, ConfigError, InputError, ParameterError
+from ..validate import DECAY, DT, GAIN, POLE_RADIUS, SIGNAL, UDOT_MAX, Range, real
 from .envelope import Envelope, derive_envelope, given_envelope
 from .params import PRESETS, BoucWenParams, preset
+from .plant import check_sample_time
 from .references import Reference, reference_from_dict
 
 __all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant"]
@@ -107,15 +110,21 @@ class StageConfig:
         )
 
 
-def _num(value: Any, where: str, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+def _num(value: Any, where: str, *, positive: bool = False, within: Range | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, Real):
         raise ConfigError(f"{where} must be a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
         raise ConfigError(f"{where} must be finite, got {value}")
     if positive and value <= 0:
         raise ConfigError(f"{where} must be a positive number, got {value:g}")
-    return value
+    return real(value, where, within=within, error=ConfigError)
+
+
+#: Supported range of the eq. (12) constants lambda1, lambda2 (1/s).
+LAMBDA = Range(0.0, 1e12, lo_open=True, unit="1/s")
+#: Supported range of the envelope margin (a factor >= 1).
+MARGIN = Range(1.0, 1e6)
 
 
 def _check_keys(table: Any, section: str, allowed: set[str]) -> dict[str, Any]:
@@ -153,7 +162,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         g = obs["gains"]
         if not isinstance(g, list) or len(g) != 3:
             raise ConfigError(f"[observer]: gains must be a list of 3 numbers, got {g!r}")
-        gains = tuple(_num(v, f"[observer] gains[{i}]") for i, v in enumerate(g))
+        gains = tuple(_num(v, f"[observer] gains[{i}]", within=GAIN) for i, v in enumerate(g))
 
     controller = None
     if "controller" in data:
@@ -161,12 +170,15 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         for k in ("lambda1", "lambda2"):
             if k not in c:
                 raise ConfigError(f"[controller]: missing key {k}")
-        lim = {k: (_num(c[k], f"[controller] {k}") if k in c else None) for k in ("u_min", "u_max")}
+        lim = {
+            k: (_num(c[k], f"[controller] {k}", within=SIGNAL) if k in c else None)
+            for k in ("u_min", "u_max")
+        }
         if lim["u_min"] is not None and lim["u_max"] is not None and lim["u_min"] >= lim["u_max"]:
             raise ConfigError("[controller]: u_min must be below u_max")
         controller = ControllerSettings(
-            lambda1=_num(c["lambda1"], "[controller] lambda1", positive=True),
-            lambda2=_num(c["lambda2"], "[controller] lambda2", positive=True),
+            lambda1=_num(c["lambda1"], "[controller] lambda1", positive=True, within=LAMBDA),
+            lambda2=_num(c["lambda2"], "[controller] lambda2", positive=True, within=LAMBDA),
             **lim,
         )
 
@@ -175,7 +187,11 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         s = _check_keys(data["sampling"], "sampling", _SECTIONS["sampling"])
         if "dt" not in s:
             raise ConfigError("[sampling]: missing key dt (s)")
-        dt = _num(s["dt"], "[sampling] dt", positive=True)
+        dt = _num(s["dt"], "[sampling] dt", positive=True, within=DT)
+        try:
+            dt = check_sample_time(plant, dt)
+        except InputError as err:
+            raise ConfigError(f"[sampling] {err}") from None
 
     reference = None
     if "reference" in data:
@@ -189,7 +205,9 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
                 raise ConfigError(
                     "[envelope]: give either udot_max or from_reference (with margin), not both"
                 )
-            env["udot_max"] = _num(env["udot_max"], "[envelope] udot_max (V/s)", positive=True)
+            env["udot_max"] = _num(
+                env["udot_max"], "[envelope] udot_max (V/s)", positive=True, within=UDOT_MAX
+            )
         elif env.get("from_reference") is True:
             if reference is None:
                 raise ConfigError("[envelope]: from_reference = true needs a [reference] section")
@@ -197,6 +215,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
                 env["margin"] = _num(env["margin"], "[envelope] margin")
                 if env["margin"] < 1:
                     raise ConfigError(f"[envelope] margin must be >= 1, got {env['margin']:g}")
+                env["margin"] = _num(env["margin"], "[envelope] margin", within=MARGIN)
         else:
             raise ConfigError(
                 "[envelope]: give udot_max (V/s, a positive number) or from_reference = true"
@@ -205,9 +224,11 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     synthesis = None
     if "synthesis" in data:
         syn = _check_keys(data["synthesis"], "synthesis", _SECTIONS["synthesis"])
-        synthesis = {k: _num(syn[k], f"[synthesis] {k}", positive=k == "pole_radius") for k in syn}
-        if synthesis.get("decay", 0.0) < 0:
-            raise ConfigError(f"[synthesis] decay must be >= 0 (1/s), got {synthesis['decay']:g}")
+        ranges = {"decay": DECAY, "pole_radius": POLE_RADIUS}
+        synthesis = {
+            k: _num(syn[k], f"[synthesis] {k}", positive=k == "pole_radius", within=ranges[k])
+            for k in syn
+        }
 
     return StageConfig(
         plant=plant,

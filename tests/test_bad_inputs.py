@@ -1,0 +1,272 @@
+"""A named table of bad inputs: each one exit 2, one ``error:`` line, nothing written.
+
+Every case runs ``bwdesign.cli.main`` in-process from inside ``tmp_path``;
+the files a case needs (stage TOML files, a user's notes, a FIFO, a symlink,
+a read-only file, a locked directory) are made there by the test. Checked for
+each: exit code 2, nothing on stdout, the last stderr line starts with
+``error:`` and is the only such line, no ``Traceback`` and no ``Warning`` on
+stderr, and the directory holds exactly what it held before.
+
+``python tests/test_bad_inputs.py`` prints the table with each case's error line.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from bwdesign.cli.main import main
+
+ROOT = Path(__file__).resolve().parents[1]
+GOOD_TOML = (ROOT / "configs" / "paper_experiment.toml").read_text()
+PLANT = """[plant]
+name = "t"
+a1 = 159827.5
+a2 = 713.8
+a3 = 222665.02
+alpha = 0.4795
+beta = 0.3762
+gamma = 0.0378
+"""
+GAINS = ["--gains", "8,64,-512"]
+CERT = ["certify", "--plant", "paper_experiment", *GAINS, "--udot-max", "361"]
+SYN = ["synthesize", "--plant", "paper_experiment", "--udot-max", "400"]
+SIM = [
+    "simulate", "--plant", "paper_experiment", *GAINS, "--amplitude", "80", "--offset", "100",
+    "--frequency", "1", "--lambda1", "1", "--lambda2", "2", "--dt", "2e-4", "--duration", "0.01",
+]  # fmt: skip
+REPORT = ["report", "--config", "stage.toml", "--out", "rep", "--quiet"]
+
+
+def _stage(text: str | bytes) -> Callable[[Path], None]:
+    def make(tmp: Path) -> None:
+        data = text.encode() if isinstance(text, str) else text
+        (tmp / "stage.toml").write_bytes(data)
+
+    return make
+
+
+def _good(tmp: Path) -> None:
+    _stage(GOOD_TOML)(tmp)
+
+
+def _user_dir(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "mydir").mkdir()
+    (tmp / "mydir" / "notes.txt").write_text("my notes\n")
+
+
+def _user_file(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "afile").write_text("my file\n")
+
+
+def _symlinks(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "real.csv").write_text("my data\n")
+    (tmp / "link.csv").symlink_to(tmp / "real.csv")
+    (tmp / "realdir").mkdir()
+    (tmp / "linkdir").symlink_to(tmp / "realdir", target_is_directory=True)
+
+
+def _fifo(tmp: Path) -> None:
+    os.mkfifo(tmp / "pipe")
+
+
+def _read_only(tmp: Path) -> None:
+    (tmp / "ro.csv").write_text("# written by bwdesign 0 (simulate --csv) sha256=0\n")
+    (tmp / "ro.csv").chmod(0o444)
+
+
+def _locked(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "locked").mkdir()
+    (tmp / "locked").chmod(0o555)
+
+
+def _replace(old: str, new: str) -> Callable[[Path], None]:
+    assert old in GOOD_TOML, old
+    return _stage(GOOD_TOML.replace(old, new))
+
+
+def _plant(old: str, new: str, extra: str = "") -> Callable[[Path], None]:
+    assert old in PLANT, old
+    return _stage(PLANT.replace(old, new) + extra)
+
+
+STAGE = ["--plant", "stage.toml"]
+CERT_STAGE = ["certify", *STAGE, *GAINS, "--udot-max", "361"]
+ENV = "from_reference = true\nmargin = 1.1"
+
+#: (name, argv, setup, part of the error line)
+CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
+    # -- the issue's cases -----------------------------------------------------
+    ("report into a dir with a user's file", [*REPORT[:4], "mydir"], _user_dir, "notes.txt"),
+    ("report into a plain file", [*REPORT[:4], "afile"], _user_file, "not a directory"),
+    ("report --out .", [*REPORT[:4], "."], _good, "current directory"),
+    ("report --out ''", [*REPORT[:4], ""], _good, "empty path"),
+    ("report --out in a locked dir", [*REPORT[:4], "locked/x"], _locked, "not writable"),
+    ("report --out symlink", [*REPORT[:4], "linkdir"], _symlinks, "symbolic link"),
+    ("report --out FIFO", [*REPORT[:4], "pipe", "--force"], _fifo, "FIFO"),
+    ("simulate --seed -3", [*SIM, "--seed", "-3"], None, "seed = -3 is outside"),
+    ("simulate --seed 1.5", [*SIM, "--seed", "1.5"], None, "expected an integer"),
+    ("certify a1 = 1e308", CERT_STAGE, _plant("a1 = 159827.5", "a1 = 1e308"), "a1 = 1e+308"),
+    ("simulate --csv symlink", [*SIM, "--csv", "link.csv"], _symlinks, "symbolic link"),
+    ("simulate --csv read-only", [*SIM, "--csv", "ro.csv"], _read_only, "read-only"),
+    ("simulate --csv FIFO", [*SIM, "--csv", "pipe"], _fifo, "FIFO"),
+    ("simulate --csv user's file", [*SIM, "--csv", "afile"], _user_file, "never overwrites"),
+    ("simulate --csv ''", [*SIM, "--csv", ""], None, "empty path"),
+    ("simulate --csv a directory", [*SIM, "--csv", "mydir"], _user_dir, "directory"),
+    ("simulate --csv in a locked dir", [*SIM, "--csv", "locked/x.csv"], _locked, "not writable"),
+    ("simulate --csv missing dir", [*SIM, "--csv", "nodir/x.csv"], None, "does not exist"),
+    ("certify --udot-max 1e300", [*CERT[:-1], "1e300"], None, "udot_max (V/s) = 1e+300"),
+    ("synthesize --udot-max 1e300", [*SYN[:-1], "1e300"], None, "udot_max (V/s) = 1e+300"),
+    ("certify --dt 1", [*CERT, "--dt", "1"], None, "dt = 1 s is too long"),
+    ("simulate --dt 1", [*SIM[:-4], "--dt", "1", "--duration", "10"], None, "too long"),
+    ("report dt = 1 in TOML", REPORT, _replace("dt = 0.0002", "dt = 1.0"), "too long"),
+    # -- kept from before: already clean ---------------------------------------
+    ("unknown preset", ["params", "--plant", "no_such_stage"], None, "unknown plant preset"),
+    ("missing key", ["params", *STAGE], _plant("a2 = 713.8\n", ""), "missing field(s) a2"),
+    ("negative dt", [*CERT, "--dt", "-1"], None, "expected a positive number"),
+    (
+        "malformed gains",
+        ["certify", "--plant", "paper_experiment", "--gains", "1,2", "--udot-max", "361"],
+        None,
+        "three comma-separated",
+    ),  # fmt: skip
+    (
+        "unbounded parameters",
+        ["certify", "--plant", "paper_simulation", *GAINS, "--udot-max", "1"],
+        None,
+        "outside the bounded",
+    ),  # fmt: skip
+    # -- more ranges and types -------------------------------------------------
+    ("certify --dt 1e-12", [*CERT, "--dt", "1e-12"], None, "dt (s) = 1e-12 is outside"),
+    ("certify --decay 1e300", [*CERT, "--decay", "1e300"], None, "decay (1/s) = 1e+300"),
+    ("synthesize --pole-radius 1e300", [*SYN, "--pole-radius", "1e300"], None, "pole_radius"),
+    (
+        "certify gain 1e300",
+        ["certify", "--plant", "paper_experiment", "--gains", "8,64,-1e300", "--udot-max", "361"],
+        None,
+        "supported range",
+    ),  # fmt: skip
+    (
+        "certify gain nan",
+        ["certify", "--plant", "paper_experiment", "--gains", "nan,64,-512", "--udot-max", "361"],
+        None,
+        "finite",
+    ),  # fmt: skip
+    ("simulate --amplitude 1e300", [*SIM, "--amplitude", "1e300"], None, "amplitude = 1e+300"),
+    ("simulate --frequency 1e300", [*SIM, "--frequency", "1e300"], None, "frequency = 1e+300"),
+    ("simulate --lambda1 0", [*SIM, "--lambda1", "0"], None, "expected a positive number"),
+    ("simulate --noise-std -1", [*SIM, "--noise-std", "-1"], None, "expected a number >= 0"),
+    ("simulate --u-min > --u-max", [*SIM, "--u-min", "5", "--u-max", "1"], None, "u_min < u_max"),
+    ("simulate --offset nan", [*SIM, "--offset", "nan"], None, "expected a finite number"),
+    ("simulate --duration 1e300", [*SIM, "--duration", "1e300"], None, "exceeds the limit"),
+    (
+        "simulate unbounded --true-plant",
+        [*SIM, "--true-plant", "paper_simulation"],
+        None,
+        "outside the bounded",
+    ),
+    ("a3 = 1e-300", ["params", *STAGE], _plant("a3 = 222665.02", "a3 = 1e-300"), "|a3|"),
+    ("beta = 1e300", ["params", *STAGE], _plant("beta = 0.3762", "beta = 1e300"), "beta = 1e+300"),
+    (
+        "physical m = 1e-300",
+        ["params", *STAGE],
+        _stage(
+            "[plant]\nm = 1e-300\nb = 1.0\nk = 1.0\nd = 1.0\nalpha0 = 1.0\n"
+            "beta = 0.2\ngamma = 0.1\n"
+        ),
+        "m = 1e-300",
+    ),  # fmt: skip
+    ("a1 is a bool", ["params", *STAGE], _plant("a1 = 159827.5", "a1 = true"), "a1 must be"),
+    ("a1 is a string", ["params", *STAGE], _plant("a1 = 159827.5", 'a1 = "1e5"'), "a1 must be"),
+    (
+        "reference kind is a list",
+        ["params", *STAGE],
+        _plant("gamma = 0.0378", "gamma = 0.0378", "[reference]\nkind = [1]\namplitude = 1.0\n"),
+        "kind must be one of",
+    ),  # fmt: skip
+    ("bad UTF-8", ["params", *STAGE], _stage(b'[plant]\nname = "\xff\xfe"\n'), "malformed TOML"),
+    ("stage file is a directory", ["params", "--plant", "mydir"], _user_dir, "cannot read"),
+    ("report udot_max 1e300", REPORT, _replace(ENV, "udot_max = 1e300"), "udot_max (V/s)"),
+    ("report margin 1e300", REPORT, _replace("margin = 1.1", "margin = 1e300"), "margin"),
+    ("report decay -1", REPORT, _stage(GOOD_TOML + "[synthesis]\ndecay = -1.0\n"), "decay"),
+    ("report missing config", REPORT, None, "does not exist"),
+    (
+        "report gains strings",
+        REPORT,
+        _replace("[8.0, 64.0, -512.0]", '["8", 64, -512]'),
+        "gains[0] must be a number",
+    ),  # fmt: skip
+    ("unknown subcommand", ["frobnicate"], None, "invalid choice"),
+]
+
+
+def snapshot(path: Path) -> dict[str, object]:
+    out: dict[str, object] = {}
+    for p in sorted(path.rglob("*")):
+        st = os.lstat(p)
+        key = p.relative_to(path).as_posix()
+        out[key] = p.read_bytes() if stat.S_ISREG(st.st_mode) else stat.filemode(st.st_mode)
+    return out
+
+
+def run_case(tmp: Path, argv: list[str], setup, capsys) -> tuple[int, str, str]:
+    if setup is not None:
+        setup(tmp)
+    before = snapshot(tmp)
+    try:
+        code = main(argv)
+        out, err = capsys.readouterr()
+        assert snapshot(tmp) == before, "something was written"
+    finally:
+        if (tmp / "locked").exists():
+            (tmp / "locked").chmod(0o755)
+    return code, out, err
+
+
+def test_the_table_is_long_enough():
+    assert len(CASES) >= 40
+    assert len({c[0] for c in CASES}) == len(CASES)
+
+
+@pytest.mark.parametrize("name, argv, setup, message", CASES, ids=[c[0] for c in CASES])
+def test_bad_input(tmp_path, monkeypatch, capsys, name, argv, setup, message):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_case(tmp_path, argv, setup, capsys)
+    assert code == 2, err
+    assert out == ""
+    lines = err.splitlines()
+    assert lines and lines[-1].startswith("error: "), err
+    assert sum(ln.startswith("error: ") for ln in lines) == 1
+    assert "Traceback" not in err and "Warning" not in err
+    assert message in lines[-1], lines[-1]
+
+
+if __name__ == "__main__":  # print the table: input, exit code, error line
+    import contextlib
+    import io
+    import shlex
+    import tempfile
+
+    for name, argv, setup, _ in CASES:
+        with tempfile.TemporaryDirectory() as d:
+            os.chdir(d)
+            if setup is not None:
+                setup(Path(d))
+            err = io.StringIO()
+            try:
+                with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                    code = main(argv)
+            finally:
+                if (Path(d) / "locked").exists():
+                    (Path(d) / "locked").chmod(0o755)
+                os.chdir(ROOT)
+            line = err.getvalue().strip().splitlines()[-1]
+            print(f"| {name} | `bwdesign {shlex.join(argv)}` | {code} | {line} |")
