@@ -5,7 +5,8 @@ the files a case needs (stage TOML files, a user's notes, a FIFO, a symlink,
 a read-only file, a locked directory) are made there by the test. Checked for
 each: exit code 2, nothing on stdout, the last stderr line starts with
 ``error:`` and is the only such line, no ``Traceback`` and no ``Warning`` on
-stderr, and the directory holds exactly what it held before.
+stderr, no warning raised (recorded: under pytest warnings never reach stderr),
+and the directory holds exactly what it held before.
 
 ``python tests/test_bad_inputs.py`` prints the table with each case's error line.
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import os
 import stat
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -193,7 +195,15 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         "kind must be one of",
     ),  # fmt: skip
     ("bad UTF-8", ["params", *STAGE], _stage(b'[plant]\nname = "\xff\xfe"\n'), "malformed TOML"),
-    ("stage file is a directory", ["params", "--plant", "mydir"], _user_dir, "cannot read"),
+    ("stage file is a directory", ["params", "--plant", "mydir"], _user_dir, "not a regular"),
+    ("stage file is a FIFO", ["params", "--plant", "pipe"], _fifo, "not a regular file"),
+    ("huge stage file", ["params", *STAGE], _stage(PLANT + "#" * (1 << 21)), "at most"),
+    (
+        "huge gains list",
+        ["params", *STAGE],
+        _stage(PLANT + "[observer]\ngains = [" + "1.0, " * 50000 + "]\n"),
+        "gains must be a list of 3 numbers",
+    ),
     ("report udot_max 1e300", REPORT, _replace(ENV, "udot_max = 1e300"), "udot_max (V/s)"),
     ("report margin 1e300", REPORT, _replace("margin = 1.1", "margin = 1e300"), "margin"),
     ("report decay -1", REPORT, _stage(GOOD_TOML + "[synthesis]\ndecay = -1.0\n"), "decay"),
@@ -222,7 +232,10 @@ def run_case(tmp: Path, argv: list[str], setup, capsys) -> tuple[int, str, str]:
         setup(tmp)
     before = snapshot(tmp)
     try:
-        code = main(argv)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")  # pytest would otherwise swallow them
+            code = main(argv)
+        assert not caught, [str(w.message) for w in caught]
         out, err = capsys.readouterr()
         assert snapshot(tmp) == before, "something was written"
     finally:

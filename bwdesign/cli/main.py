@@ -18,6 +18,9 @@ from ..errors import BWDesignError
 from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK, _Parser, add_plant_args
 from .params import _cmd_params
 
+#: Longest error line printed (characters).
+MAX_ERROR_CHARS = 1000
+
 # -- registry ----------------------------------------------------------------
 
 Command = tuple[
@@ -126,7 +129,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = build_parser().parse_args(argv)
         return args._run(args)
     except BWDesignError as err:
-        print("error: " + " ".join(str(err).split()), file=sys.stderr)
+        text = " ".join(str(err).split())
+        if len(text) > MAX_ERROR_CHARS:  # e.g. a huge list quoted from a config file
+            text = text[: MAX_ERROR_CHARS - 3] + "..."
+        print("error: " + text, file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:
         # the reader went away (e.g. `bwdesign ... --json | head`): stop quietly

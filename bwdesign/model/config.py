@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
+import stat
 import tomllib
 from dataclasses import dataclass
 from numbers import Real
@@ -243,6 +245,10 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     )
 
 
+#: Largest stage file read (bytes): a stage file is a few hundred bytes.
+MAX_CONFIG_BYTES = 1 << 20
+
+
 def load_config(path: str | Path) -> StageConfig:
     """Read and validate a stage configuration file.
 
@@ -253,6 +259,14 @@ def load_config(path: str | Path) -> StageConfig:
     """
     path = Path(path)
     try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            raise ConfigError(f"config file {str(path)!r} is not a regular file")
+        if st.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(
+                f"config file {str(path)!r} is {st.st_size} bytes; a stage file holds at most "
+                f"{MAX_CONFIG_BYTES} bytes"
+            )
         raw = path.read_bytes()
     except FileNotFoundError:
         raise ConfigError(f"config file {str(path)!r} does not exist") from None
