@@ -19,9 +19,13 @@ import warnings
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from bwdesign import BoucWenParams, Sine, certify, preset, simulate, synthesize
 from bwdesign.cli.main import main
+from bwdesign.errors import ConfigError, InputError, ParameterError
+from bwdesign.validate import DT, SEED, integer, parse_real, real
 
 ROOT = Path(__file__).resolve().parents[1]
 GOOD_TOML = (ROOT / "configs" / "paper_experiment.toml").read_text()
@@ -283,3 +287,68 @@ if __name__ == "__main__":  # print the table: input, exit code, error line
                 os.chdir(ROOT)
             line = err.getvalue().strip().splitlines()[-1]
             print(f"| {name} | `bwdesign {shlex.join(argv)}` | {code} | {line} |")
+
+
+# -- the same checks in Python -------------------------------------------------------
+
+
+EXP = dict(a1=159827.5, a2=713.8, a3=222665.02, alpha=0.4795, beta=0.3762, gamma=0.0378)
+P = preset("paper_experiment")
+SINE = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
+LOOP = dict(dt=2e-4, duration=0.01, gains=(8, 64, -512), lambda1=1.0, lambda2=2.0)
+
+PYTHON = [
+    ("a1 = 1e308", lambda: BoucWenParams(**{**EXP, "a1": 1e308}), ParameterError, r"\[1e-06"),
+    (
+        "a1 numpy bool",
+        lambda: BoucWenParams(**{**EXP, "a1": np.bool_(True)}),
+        ParameterError,
+        "must be a number",
+    ),  # fmt: skip
+    ("a1 str", lambda: BoucWenParams(**{**EXP, "a1": "1e5"}), ParameterError, "must be a number"),
+    (
+        "udot_max 1e300",
+        lambda: certify(P, (8, 64, -512), udot_max=np.float64(1e300)),
+        InputError,
+        "supported range",
+    ),  # fmt: skip
+    ("dt 1", lambda: certify(P, (8, 64, -512), udot_max=361, dt=1), InputError, "too long"),
+    ("synthesize dt 1", lambda: synthesize(P, udot_max=361, dt=1.0), InputError, "too long"),
+    (
+        "simulate dt 1",
+        lambda: simulate(P, SINE, **{**LOOP, "dt": 1.0, "duration": 10.0}),
+        InputError,
+        "too long",
+    ),  # fmt: skip
+    ("seed -3", lambda: simulate(P, SINE, **LOOP, seed=-3), InputError, "seed = -3"),
+    ("seed 3.0", lambda: simulate(P, SINE, **LOOP, seed=3.0), InputError, "must be an integer"),
+    ("seed True", lambda: simulate(P, SINE, **LOOP, seed=True), InputError, "must be an integer"),
+    ("amplitude 1e300", lambda: Sine(amplitude=1e300, frequency=1.0), ConfigError, "range"),
+    ("gains str", lambda: certify(P, ("8", 64, -512), udot_max=361), ValueError, "numbers"),
+]
+
+
+@pytest.mark.parametrize("name, call, error, match", PYTHON, ids=[c[0] for c in PYTHON])
+def test_python_entry_points(name, call, error, match):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(error, match=match):
+            call()
+
+
+def test_validate_semantics():
+    assert real(np.float32(0.5), "x", within=DT) == 0.5
+    assert real(np.int64(3), "x") == 3.0 and integer(np.uint8(7), "n", within=SEED) == 7
+    for bad in (True, "1", None, [1.0], complex(1, 0)):
+        with pytest.raises(InputError, match="must be a number"):
+            real(bad, "x")
+    for bad in (3.0, True, "3", np.float64(3)):
+        with pytest.raises(InputError, match="must be an integer"):
+            integer(bad, "n")
+    with pytest.raises(InputError, match="must be finite"):
+        real(float("nan"), "x")
+    with pytest.raises(InputError, match=r"outside the supported range \[1e-09, 1\] s"):
+        parse_real("2", "dt", within=DT)
+    with pytest.raises(ParameterError) as info:
+        real(-1.0, "owner: a2", within=DT, error=ParameterError)
+    assert info.value.field == "a2"

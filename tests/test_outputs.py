@@ -505,3 +505,21 @@ def test_file_without_comment_syntax_is_never_replaced(tmp_path):
     assert (tmp_path / "x.json").read_text() == "{}"
     with pytest.raises(OutputError, match="never overwrites"):
         prepare_file(tmp_path / "x.json", command="t", comment=None)
+
+
+def test_interrupt_mid_report_keeps_the_previous_report(tmp_path, monkeypatch, capsys):
+    """SIGINT (KeyboardInterrupt) while computing: exit 2, previous report whole, no debris."""
+    out = tmp_path / "rep"
+    monkeypatch.setattr(certified, "build_report", _fake_build)
+    assert report(out) == 0
+    before = snapshot(tmp_path)
+
+    def interrupted(config, out, **kw):
+        _fake_build(config, out, **kw)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(certified, "build_report", interrupted)
+    capsys.readouterr()
+    assert report(out) == 2
+    assert_one_error(capsys, "interrupted")
+    assert snapshot(tmp_path) == before
