@@ -48,6 +48,18 @@ SIM = [
 REPORT = ["report", "--config", "stage.toml", "--out", "rep", "--quiet"]
 
 
+def sim(**changes: str) -> list[str]:
+    """``SIM`` with some options changed (``u_min="5"`` sets ``--u-min 5``)."""
+    argv = list(SIM)
+    for key, value in changes.items():
+        opt = "--" + key.replace("_", "-")
+        if opt in argv:
+            argv[argv.index(opt) + 1] = value
+        else:
+            argv += [opt, value]
+    return argv
+
+
 def _stage(text: str | bytes) -> Callable[[Path], None]:
     def make(tmp: Path) -> None:
         data = text.encode() if isinstance(text, str) else text
@@ -132,7 +144,7 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
     ("certify --udot-max 1e300", [*CERT[:-1], "1e300"], None, "udot_max (V/s) = 1e+300"),
     ("synthesize --udot-max 1e300", [*SYN[:-1], "1e300"], None, "udot_max (V/s) = 1e+300"),
     ("certify --dt 1", [*CERT, "--dt", "1"], None, "dt = 1 s is too long"),
-    ("simulate --dt 1", [*SIM[:-4], "--dt", "1", "--duration", "10"], None, "too long"),
+    ("simulate --dt 1", sim(dt="1", duration="10"), None, "too long"),
     ("report dt = 1 in TOML", REPORT, _replace("dt = 0.0002", "dt = 1.0"), "too long"),
     # -- kept from before: already clean ---------------------------------------
     ("unknown preset", ["params", "--plant", "no_such_stage"], None, "unknown plant preset"),
@@ -166,13 +178,13 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         None,
         "finite",
     ),  # fmt: skip
-    ("simulate --amplitude 1e300", [*SIM, "--amplitude", "1e300"], None, "amplitude = 1e+300"),
-    ("simulate --frequency 1e300", [*SIM, "--frequency", "1e300"], None, "frequency = 1e+300"),
-    ("simulate --lambda1 0", [*SIM, "--lambda1", "0"], None, "expected a positive number"),
+    ("simulate --amplitude 1e300", sim(amplitude="1e300"), None, "amplitude = 1e+300"),
+    ("simulate --frequency 1e300", sim(frequency="1e300"), None, "frequency = 1e+300"),
+    ("simulate --lambda1 0", sim(lambda1="0"), None, "expected a positive number"),
     ("simulate --noise-std -1", [*SIM, "--noise-std", "-1"], None, "expected a number >= 0"),
     ("simulate --u-min > --u-max", [*SIM, "--u-min", "5", "--u-max", "1"], None, "u_min < u_max"),
-    ("simulate --offset nan", [*SIM, "--offset", "nan"], None, "expected a finite number"),
-    ("simulate --duration 1e300", [*SIM, "--duration", "1e300"], None, "exceeds the limit"),
+    ("simulate --offset nan", sim(offset="nan"), None, "expected a finite number"),
+    ("simulate --duration 1e300", sim(duration="1e300"), None, "exceeds the limit"),
     (
         "simulate unbounded --true-plant",
         [*SIM, "--true-plant", "paper_simulation"],

@@ -163,7 +163,8 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
             raise ConfigError("[observer]: missing key gains = [l1, l2, l3]")
         g = obs["gains"]
         if not isinstance(g, list) or len(g) != 3:
-            raise ConfigError(f"[observer]: gains must be a list of 3 numbers, got {g!r}")
+            shown = repr(g) if len(repr(g)) <= 60 else f"{type(g).__name__} of length {len(g)}"
+            raise ConfigError(f"[observer]: gains must be a list of 3 numbers, got {shown}")
         gains = tuple(_num(v, f"[observer] gains[{i}]", within=GAIN) for i, v in enumerate(g))
 
     controller = None

@@ -285,7 +285,8 @@ class DirectoryTarget:
                 os.mkdir(root)
                 yield Stage(root)
             except OSError as err:
-                if not str(err.filename or "").startswith(str(root)):
+                where = os.path.abspath(os.fsdecode(err.filename or ""))
+                if not where.startswith(os.path.abspath(root) + os.sep):
                     raise  # not a write of this stage: the writer's own error
                 raise _os_error(err, self.what, self.path) from None
             try:
@@ -477,9 +478,10 @@ def prepare_directory(
     listed = _read_manifest(target, command, what) or {}
     previous, foreign = _scan(target, command, listed, what)
     if foreign and not force:
+        more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
         raise OutputError(
-            f"{what} {text!r} holds {foreign[0]}, which bwdesign did not write "
-            f"({len(foreign)} such path(s)); bwdesign never deletes, moves or overwrites "
+            f"{what} {text!r} holds {foreign[0]}{more}, which bwdesign did not write; "
+            "bwdesign never deletes, moves or overwrites "
             "other files: choose a new or empty directory, or pass --force to write beside "
             "them (they are kept)"
         )
