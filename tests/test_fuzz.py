@@ -35,7 +35,7 @@ from bwdesign.cli.main import main
 ROOT = Path(__file__).resolve().parents[1]
 GOOD = tomllib.loads((ROOT / "configs" / "paper_experiment.toml").read_text())
 USER = b"a user's notes\n"
-QUICK = settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck))
+QUICK = settings(max_examples=60, deadline=None, suppress_health_check=list(HealthCheck))
 SLOW = settings(max_examples=400, deadline=None, suppress_health_check=list(HealthCheck))
 
 
@@ -349,7 +349,7 @@ def _argv_props(tmp_path: Path, argv: list[str]) -> None:
 
 
 # certify/synthesize that pass validation solve LMIs (~1 s each): fewer examples
-QUICK_CERT = settings(QUICK, max_examples=10)
+QUICK_CERT = settings(QUICK, max_examples=30)
 
 
 @pytest.mark.parametrize("command", sorted(OPTIONS))

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import bwdesign.output.files as files
 import bwdesign.report.certified as certified
@@ -229,10 +231,15 @@ def test_report_refuses_another_commands_directory(tmp_path, fast_report, capsys
     assert snapshot(tmp_path) == before
 
 
-def test_report_refuses_a_foreign_manifest(tmp_path, fast_report, capsys):
+@pytest.mark.parametrize(
+    "manifest",
+    ['{"files": {"notes.txt": []}}', "[1, 2]", "not json", b"\xff\xfe", '{"written_by": 3}'],
+)
+def test_report_refuses_a_foreign_manifest(tmp_path, fast_report, capsys, manifest):
     out = tmp_path / "rep"
     out.mkdir()
-    (out / MANIFEST).write_text('{"files": {"notes.txt": []}}')
+    data = manifest if isinstance(manifest, bytes) else manifest.encode()
+    (out / MANIFEST).write_bytes(data)
     (out / "notes.txt").write_bytes(USER_BYTES)
     before = snapshot(tmp_path)
     assert report(out, "--force") == 2
@@ -523,3 +530,82 @@ def test_interrupt_mid_report_keeps_the_previous_report(tmp_path, monkeypatch, c
     assert report(out) == 2
     assert_one_error(capsys, "interrupted")
     assert snapshot(tmp_path) == before
+
+
+# -- the directory rules as a property ------------------------------------------------
+
+
+NAMES = ["report.md", "a.txt", "figures/a.png", "figures/b.png", "sub/deep/c.txt", "notes.txt"]
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=list(HealthCheck))
+@given(
+    ours=st.lists(st.sampled_from(NAMES), unique=True, max_size=4),
+    foreign=st.lists(
+        st.tuples(
+            st.sampled_from([*NAMES, "figures/user.png", "empty/"]),
+            st.sampled_from(["file", "fifo", "symlink"]),
+        ),
+        max_size=3,
+    ),  # fmt: skip
+    edit=st.booleans(),
+    new=st.lists(st.sampled_from(NAMES), unique=True, min_size=1, max_size=4),
+    force=st.booleans(),
+)
+def test_directory_rules_hold_for_any_tree(tmp_path_factory, ours, foreign, edit, new, force):
+    base = tmp_path_factory.mktemp("tree")
+    out = base / "out"
+    if ours:
+        with prepare_directory(out, command="report").stage() as st_:
+            for rel in ours:
+                st_.write_text(rel, f"old {rel}")
+    out.mkdir(exist_ok=True)
+    placed = []
+    for rel, kind in foreign:
+        p = out / rel.rstrip("/")
+        if (
+            rel in ours
+            or os.path.lexists(p)
+            or any(
+                os.path.lexists(out / parent) and not (out / parent).is_dir()
+                for parent in Path(rel).parents
+            )
+        ):
+            continue
+        if rel.endswith("/"):
+            p.mkdir(parents=True)
+        else:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            if kind == "file":
+                p.write_bytes(USER_BYTES)
+            elif kind == "fifo":
+                os.mkfifo(p)
+            else:
+                p.symlink_to(base)
+        placed.append(rel.rstrip("/"))
+    if edit and ours:
+        (out / ours[0]).write_text("edited by the user")
+        placed.append(ours[0])
+    foreign_before = {k: v for k, v in snapshot(out).items() if k in placed}
+    before = snapshot(base)
+    try:
+        target = prepare_directory(out, command="report", force=force)
+        with target.stage() as st_:
+            for rel in new:
+                st_.write_text(rel, f"new {rel}")
+    except OutputError:
+        assert snapshot(base) == before  # refused: nothing changed at all
+        return
+    assert force or not placed  # without --force only a clean directory is written
+    after = snapshot(out)
+    for rel, value in foreign_before.items():
+        if rel in new and edit and rel == ours[0]:
+            continue  # a listed file the user edited: --force replaces it
+        assert after[rel] == value, rel  # foreign entries untouched
+    for rel in new:
+        assert (out / rel).read_text() == f"new {rel}"
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert set(manifest["files"]) == set(new) and manifest["complete"] is True
+    for rel in set(ours) - set(new) - set(placed):
+        assert not (out / rel).exists(), rel  # bwdesign's own obsolete files go
+    assert not list(out.rglob(".bwdesign-tmp-*"))

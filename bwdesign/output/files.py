@@ -396,7 +396,9 @@ def _read_manifest(path: Path, command: str, what: str) -> dict[str, list[str]] 
         doc = json.loads(mpath.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError):
         raise foreign from None
-    files = doc.get("files") if isinstance(doc, dict) else None
+    if not isinstance(doc, dict):
+        raise foreign
+    files = doc.get("files")
     if (
         doc.get("written_by") != "bwdesign"
         or not isinstance(files, dict)
