@@ -181,11 +181,14 @@ SIM = [
 ]  # fmt: skip
 
 
-def _stage_props(tmp_path: Path, data: bytes) -> None:
+def _stage_props(tmp_path: Path, data: bytes, *, report: bool = False) -> None:
     w = _workdir(tmp_path)
     (w / "stage.toml").write_bytes(data)
     check_cli(w, ["params", "--plant", "stage.toml", "--json"])
     check_cli(w, ["simulate", "--plant", "stage.toml", *SIM, "--csv", "out.csv"])
+    check_cli(w, ["certify", "--plant", "stage.toml", "--gains", "8,64,-512", "--udot-max", "50"])
+    if report:  # seconds per valid file
+        check_cli(w, ["report", "--config", "stage.toml", "--out", "rep", "--quiet"])
 
 
 @QUICK
@@ -195,10 +198,10 @@ def test_generated_stage_files(tmp_path_factory, data):
 
 
 @pytest.mark.slow
-@SLOW
+@settings(SLOW, max_examples=200)
 @given(data=stage_files())
 def test_generated_stage_files_many(tmp_path_factory, data):
-    _stage_props(tmp_path_factory.mktemp("stage"), data)
+    _stage_props(tmp_path_factory.mktemp("stage"), data, report=True)
 
 
 def test_oversized_stage_file(tmp_path):
