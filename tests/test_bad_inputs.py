@@ -128,6 +128,8 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
     ("report --out .", [*REPORT[:4], "."], _good, "current directory"),
     ("report --out ''", [*REPORT[:4], ""], _good, "empty path"),
     ("report --out in a locked dir", [*REPORT[:4], "locked/x"], _locked, "not writable"),
+    ("report --out below a file", [*REPORT[:4], "afile/sub"], _user_file, "not a directory"),
+    ("simulate --csv below a file", [*SIM, "--csv", "afile/x.csv"], _user_file, "not a directory"),
     ("report --out symlink", [*REPORT[:4], "linkdir"], _symlinks, "symbolic link"),
     ("report --out FIFO", [*REPORT[:4], "pipe", "--force"], _fifo, "FIFO"),
     ("simulate --seed -3", [*SIM, "--seed", "-3"], None, "seed = -3 is outside"),

@@ -28,8 +28,9 @@ Directory outputs (``bwdesign report --out DIR``)::
   A run that fails or is interrupted removes it (and ``DIR`` if the run
   created it); a run killed by SIGKILL leaves it behind, recognisable by its
   name, and the next run of the same command removes it (when no process with
-  that pid is alive) before it starts. The previous output is untouched until
-  the commit.
+  that pid is alive) before it starts; while that pid runs (or if an unrelated
+  process reused it) the target is refused, naming the staging directory.
+  The previous output is untouched until the commit.
 - Commit (milliseconds, after all work): first a manifest marked
   ``"complete": false`` listing the old and new files (with both checksums),
   then each file moved into place with :func:`os.replace` (each move is
