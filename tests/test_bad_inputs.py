@@ -150,6 +150,8 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
     ("report dt = 1 in TOML", REPORT, _replace("dt = 0.0002", "dt = 1.0"), "too long"),
     # -- kept from before: already clean ---------------------------------------
     ("unknown preset", ["params", "--plant", "no_such_stage"], None, "unknown plant preset"),
+    ("empty --plant", ["params", "--plant", ""], None, "unknown plant preset ''"),
+    ("empty --config", [*REPORT[:2], "", *REPORT[3:]], None, "empty path"),
     ("missing key", ["params", *STAGE], _plant("a2 = 713.8\n", ""), "missing field(s) a2"),
     ("negative dt", [*CERT, "--dt", "-1"], None, "expected a positive number"),
     (

@@ -258,6 +258,8 @@ def load_config(path: str | Path) -> StageConfig:
     ConfigError
         Missing file, malformed TOML, unknown sections or keys, wrong types.
     """
+    if not str(path).strip():
+        raise ConfigError("an empty path names no config file")
     path = Path(path)
     try:
         st = os.stat(path)
@@ -297,6 +299,8 @@ def load_plant(name_or_path: str | Path) -> BoucWenParams:
     """
     if isinstance(name_or_path, str) and name_or_path in PRESETS:
         return preset(name_or_path)
+    if not str(name_or_path).strip():
+        return preset("")  # raises the "unknown preset" error, listing the presets
     p = Path(name_or_path)
     if p.suffix.lower() != ".toml" and not p.exists():
         return preset(str(name_or_path))  # raises the "unknown preset" error
