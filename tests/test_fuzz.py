@@ -202,7 +202,7 @@ def test_generated_stage_files(tmp_path_factory, data):
 
 
 @pytest.mark.slow
-@settings(SLOW, max_examples=50 * SCALE)
+@settings(SLOW, max_examples=25 * SCALE)
 @given(data=stage_files())
 def test_generated_stage_files_many(tmp_path_factory, data):
     _stage_props(tmp_path_factory.mktemp("stage"), data, report=True)
