@@ -20,6 +20,7 @@ from .errors import (
     InputError,
     MissingExtraError,
     NotCertifiedError,
+    OutputError,
     ParameterError,
     SolverError,
     UnboundedModelError,
@@ -99,4 +100,5 @@ __all__ = [
     "hysteresis_bode",
     "ErrorDynamics",
     "HysteresisBode",
+    "OutputError",
 ]

@@ -17,6 +17,7 @@ __all__ = [
     "SolverError",
     "MissingExtraError",
     "NotCertifiedError",
+    "OutputError",
 ]
 
 
@@ -87,4 +88,13 @@ class NotCertifiedError(BWDesignError, RuntimeError):
 
     Raised where going on would hand out an uncertified result, e.g. exporting
     firmware for gains that no certificate tier holds for.
+    """
+
+
+class OutputError(BWDesignError, ValueError):
+    """An output path cannot be written safely (wrong kind, foreign files, no permission).
+
+    Raised by :mod:`bwdesign.output.files` before any work is done when the
+    target is refused, or at write time when the operating system refuses
+    (disk full, permission); in both cases no user file was changed.
     """

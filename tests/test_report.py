@@ -134,9 +134,11 @@ def test_bad_configs(tmp_path, capsys, label, text, message):
 
 
 def test_failure_leaves_existing_report_untouched(tmp_path, monkeypatch):
+    from bwdesign.output.files import prepare_directory
+
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "report.md").write_text("previous")
+    with prepare_directory(out, command="report").stage() as stage:  # a previous report
+        stage.write_text("report.md", "previous")
     import bwdesign.report.certified as report
 
     def boom(*a, **k):

@@ -332,9 +332,9 @@ def test_cli_json_and_csv(tmp_path, capsys):
     assert doc["length_unit"] == "um" and len(doc["window"]) == 2
     assert set(doc["estimation_rmse"]) == {"x1", "x2", "x3"}
     assert doc["settings"]["noise_std"] == 0.01 and doc["settings"]["seed"] == 3
-    data = np.loadtxt(csv, delimiter=",", skiprows=1)
+    data = np.loadtxt(csv, delimiter=",", skiprows=2)  # signature line, header
     assert data.shape == (2500, 11)
-    assert csv.read_text().startswith("t,x1,x2,x3,x1hat,x2hat,x3hat,u,x_d,e,z")
+    assert csv.read_text().splitlines()[1] == "t,x1,x2,x3,x1hat,x2hat,x3hat,u,x_d,e,z"
     assert not list(tmp_path.glob(".bwdesign-*"))  # no temporary left behind
 
 

@@ -11,11 +11,11 @@ import numpy as np
 
 from ..errors import GainError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import _check_dt, discretize
+from ..model.plant import check_sample_time, discretize
+from ..validate import DECAY, POLE_RADIUS, UDOT_MAX, real
 from .checks import (
     _lipschitz_coefficient,
     _model_matrix,
-    _rate,
     _similar,
     continuous_equivalent,
     rho_interval,
@@ -97,14 +97,14 @@ def synthesize(
     True
     """
     require_bounded(params, allow_unbounded)
-    udot_max = _rate(udot_max, "udot_max (V/s)", positive=True)
-    decay = _rate(decay, "decay (1/s)", positive=False)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+    decay = real(decay, "decay (1/s)", within=DECAY)
     if dt is not None:
-        dt = _check_dt(dt)
+        dt = check_sample_time(params, dt)
     R = (
         default_pole_radius(params, dt)
         if pole_radius is None
-        else _rate(pole_radius, "pole_radius (rad/s)", positive=True)
+        else real(pole_radius, "pole_radius (rad/s)", within=POLE_RADIUS)
     )
     if dt is None:
         return _synthesize_continuous(params, udot_max, decay, R, allow_unbounded)

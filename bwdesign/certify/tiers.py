@@ -57,8 +57,9 @@ from scipy.linalg import solve_continuous_lyapunov
 
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import _check_dt
+from ..model.plant import check_sample_time
 from ..observers.gains import _as_gains, check_gains, discrete_gains, error_matrix
+from ..validate import DECAY, UDOT_MAX, real
 from .checks import (
     _Check,
     _check_lipschitz,
@@ -68,7 +69,6 @@ from .checks import (
     _lipschitz_coefficient,
     _posdef,
     _prepare_sampled,
-    _rate,
     _scale_continuous,
     _Scaled,
     _similar,
@@ -441,10 +441,10 @@ def certify(
     (False, True)
     """
     require_bounded(params, allow_unbounded)
-    udot_max = _rate(udot_max, "udot_max (V/s)", positive=True)
-    decay = _rate(decay, "decay (1/s)", positive=False)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+    decay = real(decay, "decay (1/s)", within=DECAY)
     if dt is not None:
-        dt = _check_dt(dt)
+        dt = check_sample_time(params, dt)
     gains = tuple(check_gains(params, gains).tolist())
     sc = _scale_continuous(params, error_matrix(params, gains))
     if tiers is None:
@@ -505,9 +505,9 @@ def certify_discrete(
         With ``gains = None`` and one certificate, ``sampled``.
     """
     require_bounded(params, allow_unbounded)
-    udot_max = _rate(udot_max, "udot_max (V/s)", positive=True)
-    decay = _rate(decay, "decay (1/s)", positive=False)
-    dt = _check_dt(dt)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+    decay = real(decay, "decay (1/s)", within=DECAY)
+    dt = check_sample_time(params, dt)
     Kv = np.asarray(_as_gains(K, "discrete gains K"))
     cert = _sampled(params, Kv, udot_max, decay, dt)
     return CertificateReport(

@@ -18,6 +18,9 @@ from ..errors import BWDesignError, NotCertifiedError
 from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK, _Parser, add_plant_args
 from .params import _cmd_params
 
+#: Longest error line printed (characters).
+MAX_ERROR_CHARS = 1000
+
 # -- registry ----------------------------------------------------------------
 
 Command = tuple[
@@ -47,7 +50,18 @@ def _report_args(p: argparse.ArgumentParser) -> None:
         metavar="FILE.toml",
         help="stage configuration file, or a bundled preset's name (see bwdesign presets)",
     )
-    p.add_argument("--out", required=True, metavar="DIR", help="report directory (replaced)")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="report directory: new, empty, or a report bwdesign wrote (its files are "
+        "replaced); never the current directory",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a directory holding other files (they are kept, never overwritten)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--allow-unbounded",
@@ -58,10 +72,16 @@ def _report_args(p: argparse.ArgumentParser) -> None:
 
 def _cmd_report(args: argparse.Namespace) -> int:
     from ..model.config import load_config
+    from ..output.files import prepare_directory
     from ..report.certified import write_report
 
+    prepare_directory(args.out, command="report", force=args.force, what="--out")
     outcome = write_report(
-        load_config(args.config), args.out, quiet=args.quiet, allow_unbounded=args.allow_unbounded
+        load_config(args.config),
+        args.out,
+        quiet=args.quiet,
+        allow_unbounded=args.allow_unbounded,
+        force=args.force,
     )
     print(f"{outcome.out_dir}/report.md: {outcome.verdict}")
     return EXIT_OK if outcome.certified else EXIT_NO
@@ -147,7 +167,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("not certified: " + " ".join(str(err).split()), file=sys.stderr)
         return EXIT_NO
     except BWDesignError as err:
-        print("error: " + " ".join(str(err).split()), file=sys.stderr)
+        text = " ".join(str(err).split())
+        if len(text) > MAX_ERROR_CHARS:  # e.g. a huge list quoted from a config file
+            text = text[: MAX_ERROR_CHARS - 3] + "..."
+        print("error: " + text, file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:
         # the reader went away (e.g. `bwdesign ... --json | head`): stop quietly

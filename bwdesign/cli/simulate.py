@@ -17,14 +17,12 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
 from ..model.config import load_plant
 from ..model.references import Reference, Sine, Step, Triangle
+from ..output.files import FileTarget, prepare_file
 from ..output.jsonenc import dump_json
 from ..sim.closed_loop import simulate
 from ..sim.result import SimulationResult
@@ -165,7 +163,8 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         "--csv",
         default=None,
         metavar="FILE",
-        help="write the time series (t, x, xhat, u, x_d, e, z) to FILE",
+        help="write the time series (t, x, xhat, u, x_d, e, z) to FILE: a new file, or one "
+        "an earlier --csv wrote and nobody changed since (its first line says so)",
     )
 
 
@@ -216,31 +215,13 @@ def _reference(args: argparse.Namespace, stage: Stage) -> Reference:
     )
 
 
-def _check_csv_target(path: str) -> Path:
-    target = Path(path)
-    parent = target.parent if str(target.parent) else Path(".")
-    if target.is_dir():
-        raise UsageError(f"--csv {path!r} is a directory")
-    if not parent.is_dir():
-        raise UsageError(f"--csv: directory {str(parent)!r} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise UsageError(f"--csv: directory {str(parent)!r} is not writable")
-    return target
-
-
-def _write_csv(result: SimulationResult, target: Path) -> None:
+def _write_csv(result: SimulationResult, target: FileTarget) -> None:
     cols = np.column_stack(
         [result.t, result.x, result.xhat, result.u, result.x_d, result.e, result.z]
     )
     header = "t,x1,x2,x3,x1hat,x2hat,x3hat,u,x_d,e,z"
-    fd, tmp = tempfile.mkstemp(prefix=".bwdesign-", suffix=".csv", dir=target.parent or ".")
-    try:
-        with os.fdopen(fd, "w") as f:
-            np.savetxt(f, cols, delimiter=",", header=header, comments="", fmt="%.10g")
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with target.open() as f:
+        np.savetxt(f, cols, delimiter=",", header=header, comments="", fmt="%.10g")
 
 
 def run_simulate(args: argparse.Namespace) -> int:
@@ -277,7 +258,9 @@ def run_simulate(args: argparse.Namespace) -> int:
     u_limits = _u_limits(args.u_min, args.u_max)
     if args.integral_rate is not None and args.form != "discrete":
         raise UsageError("--integral-rate needs --form discrete")
-    target = _check_csv_target(args.csv) if args.csv else None
+    target = None
+    if args.csv is not None:
+        target = prepare_file(args.csv, command="simulate --csv", what="--csv")
     start = start_on_reference(params, reference) if args.start_on_reference else {}
     result = simulate(
         params,
@@ -305,7 +288,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     doc["plant"] = params.to_dict()
     doc["reference"] = reference.to_dict()
     doc["observer"] = args.observer
-    doc["csv"] = str(target) if target else None
+    doc["csv"] = str(target.path) if target else None
     doc["start"] = "on reference" if args.start_on_reference else "rest"
     doc["defaults_from_file"] = stage.to_dict()
     if args.json:

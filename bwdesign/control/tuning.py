@@ -12,6 +12,7 @@ from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import _check_dt
 from ..observers.gains import _as_gains
+from ..validate import Range, integer
 from .analysis import LoopAnalysis, analyze_loop
 from .systems import LoopSystems, _stable, loop_systems
 
@@ -274,8 +275,7 @@ def digital_tuning(
         raise InputError(f"mismatch must be a relative error in [0, 0.5), got {mismatch}")
     if integral_ratio is not None and not integral_ratio > 0:
         raise InputError(f"integral_ratio must be > 0 or None, got {integral_ratio}")
-    if int(n_candidates) < 1:
-        raise InputError(f"n_candidates must be >= 1, got {n_candidates}")
+    n_candidates = integer(n_candidates, "n_candidates", within=Range(1, 10_000))
     # observers to try: (omega_o, gains)
     if gains is None:
         radii = _RADII if observer_radius is None else (float(observer_radius),)

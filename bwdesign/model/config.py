@@ -21,14 +21,19 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
+import stat
 import tomllib
 from dataclasses import dataclass
+from numbers import Real
 from pathlib import Path
 from typing import Any
 
-from ..errors import BWDesignError, ConfigError, ParameterError
+from ..errors import BWDesignError, ConfigError, InputError, ParameterError
+from ..validate import DECAY, DT, GAIN, POLE_RADIUS, SIGNAL, UDOT_MAX, Range, real
 from .envelope import Envelope, derive_envelope, given_envelope
 from .params import PRESETS, BoucWenParams, preset
+from .plant import check_sample_time
 from .references import Reference, reference_from_dict
 from .requirements import parse_requirements
 from .stage_presets import resolve_config, stage_presets
@@ -116,15 +121,21 @@ class StageConfig:
         )
 
 
-def _num(value: Any, where: str, *, positive: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+def _num(value: Any, where: str, *, positive: bool = False, within: Range | None = None) -> float:
+    if isinstance(value, bool) or not isinstance(value, Real):
         raise ConfigError(f"{where} must be a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
         raise ConfigError(f"{where} must be finite, got {value}")
     if positive and value <= 0:
         raise ConfigError(f"{where} must be a positive number, got {value:g}")
-    return value
+    return real(value, where, within=within, error=ConfigError)
+
+
+#: Supported range of the eq. (12) constants lambda1, lambda2 (1/s).
+LAMBDA = Range(0.0, 1e12, lo_open=True, unit="1/s")
+#: Supported range of the envelope margin (a factor >= 1).
+MARGIN = Range(1.0, 1e6)
 
 
 def _check_keys(table: Any, section: str, allowed: set[str]) -> dict[str, Any]:
@@ -161,8 +172,9 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
             raise ConfigError("[observer]: missing key gains = [l1, l2, l3]")
         g = obs["gains"]
         if not isinstance(g, list) or len(g) != 3:
-            raise ConfigError(f"[observer]: gains must be a list of 3 numbers, got {g!r}")
-        gains = tuple(_num(v, f"[observer] gains[{i}]") for i, v in enumerate(g))
+            shown = repr(g) if len(repr(g)) <= 60 else f"{type(g).__name__} of length {len(g)}"
+            raise ConfigError(f"[observer]: gains must be a list of 3 numbers, got {shown}")
+        gains = tuple(_num(v, f"[observer] gains[{i}]", within=GAIN) for i, v in enumerate(g))
 
     controller = None
     if "controller" in data:
@@ -170,12 +182,15 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         for k in ("lambda1", "lambda2"):
             if k not in c:
                 raise ConfigError(f"[controller]: missing key {k}")
-        lim = {k: (_num(c[k], f"[controller] {k}") if k in c else None) for k in ("u_min", "u_max")}
+        lim = {
+            k: (_num(c[k], f"[controller] {k}", within=SIGNAL) if k in c else None)
+            for k in ("u_min", "u_max")
+        }
         if lim["u_min"] is not None and lim["u_max"] is not None and lim["u_min"] >= lim["u_max"]:
             raise ConfigError("[controller]: u_min must be below u_max")
         controller = ControllerSettings(
-            lambda1=_num(c["lambda1"], "[controller] lambda1", positive=True),
-            lambda2=_num(c["lambda2"], "[controller] lambda2", positive=True),
+            lambda1=_num(c["lambda1"], "[controller] lambda1", positive=True, within=LAMBDA),
+            lambda2=_num(c["lambda2"], "[controller] lambda2", positive=True, within=LAMBDA),
             **lim,
         )
 
@@ -184,7 +199,11 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         s = _check_keys(data["sampling"], "sampling", _SECTIONS["sampling"])
         if "dt" not in s:
             raise ConfigError("[sampling]: missing key dt (s)")
-        dt = _num(s["dt"], "[sampling] dt", positive=True)
+        dt = _num(s["dt"], "[sampling] dt", positive=True, within=DT)
+        try:
+            dt = check_sample_time(plant, dt)
+        except InputError as err:
+            raise ConfigError(f"[sampling] {err}") from None
 
     reference = None
     if "reference" in data:
@@ -199,7 +218,10 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
                     "[envelope]: give either udot_max or from_reference (with margin), not both"
                 )
             env["udot_max"] = _num(
-                env["udot_max"], "[envelope] udot_max (input unit/s)", positive=True
+                env["udot_max"],
+                "[envelope] udot_max (input unit/s)",
+                positive=True,
+                within=UDOT_MAX,
             )
         elif env.get("from_reference") is True:
             if reference is None:
@@ -208,6 +230,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
                 env["margin"] = _num(env["margin"], "[envelope] margin")
                 if env["margin"] < 1:
                     raise ConfigError(f"[envelope] margin must be >= 1, got {env['margin']:g}")
+                env["margin"] = _num(env["margin"], "[envelope] margin", within=MARGIN)
         else:
             raise ConfigError(
                 "[envelope]: give udot_max (input unit/s, a positive number) or "
@@ -217,9 +240,11 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     synthesis = None
     if "synthesis" in data:
         syn = _check_keys(data["synthesis"], "synthesis", _SECTIONS["synthesis"])
-        synthesis = {k: _num(syn[k], f"[synthesis] {k}", positive=k == "pole_radius") for k in syn}
-        if synthesis.get("decay", 0.0) < 0:
-            raise ConfigError(f"[synthesis] decay must be >= 0 (1/s), got {synthesis['decay']:g}")
+        ranges = {"decay": DECAY, "pole_radius": POLE_RADIUS}
+        synthesis = {
+            k: _num(syn[k], f"[synthesis] {k}", positive=k == "pole_radius", within=ranges[k])
+            for k in syn
+        }
 
     return StageConfig(
         plant=plant,
@@ -237,6 +262,10 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     )
 
 
+#: Largest stage file read (bytes): a stage file is a few hundred bytes.
+MAX_CONFIG_BYTES = 1 << 20
+
+
 def load_config(path: str | Path) -> StageConfig:
     """Read and validate a stage configuration file.
 
@@ -248,8 +277,18 @@ def load_config(path: str | Path) -> StageConfig:
     ConfigError
         Missing file, malformed TOML, unknown sections or keys, wrong types.
     """
+    if not str(path).strip():
+        raise ConfigError("an empty path names no config file")
     path = resolve_config(path)
     try:
+        st = os.stat(path)
+        if not stat.S_ISREG(st.st_mode):
+            raise ConfigError(f"config file {str(path)!r} is not a regular file")
+        if st.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(
+                f"config file {str(path)!r} is {st.st_size} bytes; a stage file holds at most "
+                f"{MAX_CONFIG_BYTES} bytes"
+            )
         raw = path.read_bytes()
     except FileNotFoundError:
         raise ConfigError(f"config file {str(path)!r} does not exist") from None
@@ -281,6 +320,8 @@ def load_plant(name_or_path: str | Path) -> BoucWenParams:
     """
     if isinstance(name_or_path, str) and name_or_path in PRESETS:
         return preset(name_or_path)
+    if not str(name_or_path).strip():
+        return preset("")  # raises the "unknown preset" error, listing the presets
     p = Path(name_or_path)
     if p.suffix.lower() != ".toml" and not p.exists() and str(p) not in stage_presets():
         return preset(str(name_or_path))  # raises the "unknown preset" error

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ..errors import InputError
+from ..validate import UDOT_MAX, Range, integer, real
 from .params import BoucWenParams, require_bounded
 from .plant import hysteresis_increment
 from .references import Reference
@@ -81,12 +82,8 @@ class Envelope:
 
 
 def given_envelope(udot_max: float) -> Envelope:
-    """An envelope stated directly (V/s)."""
-    if isinstance(udot_max, bool) or not isinstance(udot_max, int | float):
-        raise InputError(f"udot_max must be a number of V/s, got {udot_max!r}")
-    udot_max = float(udot_max)
-    if not math.isfinite(udot_max) or udot_max <= 0:
-        raise InputError(f"udot_max must be a positive finite number of V/s, got {udot_max}")
+    """An envelope stated directly (V/s), in :data:`bwdesign.validate.UDOT_MAX`."""
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
     return Envelope(udot_max=udot_max, source="given", method="stated in the configuration")
 
 
@@ -185,11 +182,12 @@ def derive_envelope(
     InputError
         A step with no rise time, a margin below 1, or a non-finite rate.
     """
-    if not math.isfinite(margin) or margin < 1:
-        raise InputError(f"envelope margin must be a finite number >= 1, got {margin}")
+    margin = real(margin, "envelope margin", within=Range(1.0, 1e6))
+    periods = integer(periods, "periods", within=Range(2, 1000))
+    steps_per_period = integer(steps_per_period, "steps_per_period", within=Range(10, 10**7))
     T = reference.period
     if T is not None:
-        n = max(int(periods), 2)
+        n = periods
         t = np.linspace(0.0, n * T, n * steps_per_period + 1)
         last = t >= (n - 1) * T
     else:

@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from ..errors import ParameterError, UnboundedModelError
+from ..validate import Range, real
 
 __all__ = [
     "BoucWenParams",
@@ -27,23 +28,40 @@ __all__ = [
     "PRESETS",
     "preset",
     "require_bounded",
+    "PARAM_RANGES",
+    "PHYSICAL_RANGES",
 ]
 
 MODEL_FIELDS = ("a1", "a2", "a3", "alpha", "beta", "gamma")
 PHYSICAL_FIELDS = ("m", "b", "k", "d", "alpha0")
 
 
-def _number(value: Any, name: str, owner: str) -> float:
-    """Return ``value`` as a finite float or raise :class:`ParameterError`."""
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParameterError(
-            f"{owner}: {name} must be a number, got {type(value).__name__} {value!r}",
-            field=name,
-        )
-    value = float(value)
-    if not math.isfinite(value):
-        raise ParameterError(f"{owner}: {name} must be finite, got {value}", field=name)
-    return value
+#: Supported range of each model parameter. Wide enough for every real stage
+#: (a1 = k/m from 1e-6 to 1e12 1/s^2 is a resonance from 0.16 mHz to 160 kHz);
+#: narrow enough that no product, quotient or exponential inside bwdesign
+#: overflows. ``a3`` may have either sign; ``|a3|`` must lie in ``A3_MAGNITUDE``.
+PARAM_RANGES: dict[str, Range] = {
+    "a1": Range(1e-6, 1e12, unit="1/s^2"),
+    "a2": Range(0.0, 1e9, unit="1/s"),
+    "a3": Range(-1e15, 1e15),
+    "alpha": Range(1e-9, 1e6),
+    "beta": Range(-1e6, 1e6, unit="1/V"),
+    "gamma": Range(-1e6, 1e6, unit="1/V"),
+}
+A3_MAGNITUDE = Range(1e-9, 1e15)
+#: Supported range of each physical quantity (their quotients then stay finite).
+PHYSICAL_RANGES: dict[str, Range] = {
+    "m": Range(1e-12, 1e12),
+    "b": Range(0.0, 1e12),
+    "k": Range(1e-12, 1e12),
+    "d": Range(-1e12, 1e12),
+    "alpha0": Range(-1e12, 1e12),
+}
+
+
+def _number(value: Any, name: str, owner: str, within: Range | None = None) -> float:
+    """Return ``value`` as a finite float (in ``within``) or raise :class:`ParameterError`."""
+    return real(value, f"{owner}: {name}", within=within, error=ParameterError)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,6 +97,8 @@ class PhysicalParams:
             raise ParameterError(f"PhysicalParams: k must be > 0, got {self.k}", field="k")
         if self.b < 0:
             raise ParameterError(f"PhysicalParams: b must be >= 0, got {self.b}", field="b")
+        for f in PHYSICAL_FIELDS:
+            _number(getattr(self, f), f, "PhysicalParams", PHYSICAL_RANGES[f])
 
 
 @dataclass(frozen=True)
@@ -164,6 +184,14 @@ class BoucWenParams:
             raise ParameterError(f"{owner}: a3 = k d/m must be non-zero, got 0", field="a3")
         if self.alpha <= 0:
             raise ParameterError(f"{owner}: alpha must be > 0, got {self.alpha}", field="alpha")
+        for f in MODEL_FIELDS:
+            _number(getattr(self, f), f, owner, PARAM_RANGES[f])
+        if abs(self.a3) not in A3_MAGNITUDE:
+            raise ParameterError(
+                f"{owner}: |a3| = {abs(self.a3):g} is outside the supported range "
+                f"{A3_MAGNITUDE.text()}",
+                field="a3",
+            )
         for f in ("name", "length_unit", "input_unit"):
             if not isinstance(getattr(self, f), str):
                 raise ParameterError(f"{owner}: {f} must be a string", field=f)

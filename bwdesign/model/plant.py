@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import functools
 import math
-import numbers
 from dataclasses import dataclass
+from numbers import Real
 
 import numpy as np
 from scipy.linalg import expm
 
 from ..errors import InputError
+from ..validate import DT, real
 from .params import BoucWenParams, require_bounded
 
 __all__ = [
@@ -36,6 +37,8 @@ __all__ = [
     "hysteresis_increment",
     "zoh_step",
     "simulate_zoh",
+    "check_sample_time",
+    "slowest_decay",
 ]
 
 
@@ -169,9 +172,9 @@ def discretize(params: BoucWenParams, dt: float) -> ZOHModel:
     ----------
     params : BoucWenParams
     dt : float
-        Sample time (s), > 0.
+        Sample time (s), see :func:`check_sample_time`.
     """
-    dt = _check_dt(dt)
+    dt = check_sample_time(params, dt)
     a1, a2, a3 = params.a1, params.a2, params.a3
     # Augmented exponential of d/dt [x1, x2, x3, u] with x3 and u constant,
     # balanced by D = diag(1, w0, 1, a1/a3), w0 = sqrt(a1), so every entry is
@@ -197,11 +200,52 @@ def discretize(params: BoucWenParams, dt: float) -> ZOHModel:
 
 
 def _check_dt(dt: float) -> float:
-    if isinstance(dt, bool) or not isinstance(dt, numbers.Real):
+    """``dt`` (s) as a float in the supported range :data:`bwdesign.validate.DT`."""
+    if isinstance(dt, bool) or not isinstance(dt, Real):
         raise InputError(f"dt must be a number of seconds, got {dt!r}")
     dt = float(dt)
     if not math.isfinite(dt) or dt <= 0:
         raise InputError(f"dt must be a finite number of seconds > 0, got {dt}")
+    return real(dt, "dt (s)", within=DT)
+
+
+def slowest_decay(params: BoucWenParams) -> float:
+    """Decay rate of the slowest mode of ``s^2 + a2 s + a1`` (1/s): ``min(-Re s)``."""
+    a1, a2 = params.a1, params.a2
+    disc = a2 * a2 - 4.0 * a1
+    if disc <= 0:
+        return 0.5 * a2
+    return 2.0 * a1 / (a2 + math.sqrt(disc))  # (a2 - sqrt(disc))/2 without cancellation
+
+
+#: Largest supported ``slowest_decay(params) * dt``. Over one sample every mode of
+#: the plant then shrinks by at least ``exp(-20) = 2e-9``, not to rounding noise,
+#: so the sampled model keeps the velocity observable from the displacement;
+#: beyond it pole matching and the sampled certificates lose the information
+#: (the paper_experiment stage failed at 71, with a nan in the sampled tier).
+MAX_DECAY_DT = 20.0
+
+
+def check_sample_time(params: BoucWenParams, dt: float) -> float:
+    """``dt`` (s) checked against the supported range and against the plant.
+
+    Supported: ``dt`` in :data:`bwdesign.validate.DT` and
+    ``slowest_decay(params) * dt <= MAX_DECAY_DT`` (20).
+
+    Raises
+    ------
+    InputError
+        ``dt`` is not a number, not finite, or outside either range.
+    """
+    dt = _check_dt(dt)
+    sigma = slowest_decay(params)
+    if sigma * dt > MAX_DECAY_DT:
+        label = params.name or "the plant"
+        raise InputError(
+            f"dt = {dt:g} s is too long for {label}: its slowest mode decays at {sigma:.6g} 1/s "
+            f"and the supported range is decay * dt <= {MAX_DECAY_DT:g}, i.e. "
+            f"dt <= {MAX_DECAY_DT / sigma:.4g} s"
+        )
     return dt
 
 

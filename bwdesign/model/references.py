@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from numbers import Real
 from typing import Any
 
 import numpy as np
 
 from ..errors import ConfigError
+from ..validate import SIGNAL, Range, real
 
 __all__ = ["Reference", "Sine", "Triangle", "Step", "reference_from_dict"]
 
@@ -35,7 +37,7 @@ __all__ = ["Reference", "Sine", "Triangle", "Step", "reference_from_dict"]
 def _finite(
     value: Any, name: str, owner: str, *, positive: bool = False, nonneg: bool = False
 ) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if isinstance(value, bool) or not isinstance(value, Real):
         raise ConfigError(f"{owner}: {name} must be a number, got {value!r}")
     value = float(value)
     if not math.isfinite(value):
@@ -44,7 +46,19 @@ def _finite(
         raise ConfigError(f"{owner}: {name} must be > 0, got {value}")
     if nonneg and value < 0:
         raise ConfigError(f"{owner}: {name} must be >= 0, got {value}")
-    return value
+    return real(value, f"{owner}: {name}", within=REFERENCE_RANGES[name], error=ConfigError)
+
+
+#: Supported range of each reference field (length unit, Hz, rad, s).
+REFERENCE_RANGES: dict[str, Range] = {
+    "amplitude": SIGNAL,
+    "offset": SIGNAL,
+    "frequency": Range(0.0, 1e6, lo_open=True, unit="Hz"),
+    "phase": Range(-1e6, 1e6, unit="rad"),
+    "corner_time": Range(0.0, 1e6, unit="s"),
+    "t_step": Range(-1e6, 1e6, unit="s"),
+    "rise_time": Range(0.0, 1e6, unit="s"),
+}
 
 
 class Reference:
@@ -311,7 +325,7 @@ def reference_from_dict(data: dict[str, Any], *, owner: str = "[reference]") -> 
     if not isinstance(data, dict):
         raise ConfigError(f"{owner} must be a table")
     kind = data.get("kind")
-    if kind not in _KINDS:
+    if not isinstance(kind, str) or kind not in _KINDS:
         raise ConfigError(f"{owner}: kind must be one of {', '.join(sorted(_KINDS))}, got {kind!r}")
     allowed = _KEYS[kind] | {"kind"}
     unknown = sorted(set(data) - allowed)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -10,6 +11,7 @@ import numpy as np
 from ..errors import GainError
 from ..model.params import BoucWenParams
 from ..model.plant import _check_dt, discretize
+from ..validate import GAIN
 
 __all__ = ["check_gains", "error_matrix", "discrete_gains"]
 
@@ -30,6 +32,11 @@ def _as_gains(gains: Any, what: str = "gains") -> np.ndarray:
         raise GainError(f"{what} must be three numbers (l1, l2, l3), got shape {g.shape}")
     if not np.all(np.isfinite(g)):
         raise GainError(f"{what} must be finite, got {g.tolist()}")
+    for v in np.asarray(gains, dtype=object).ravel():
+        if not isinstance(v, Real) or isinstance(v, bool):
+            raise GainError(f"{what} must be numbers, got {type(v).__name__} {v!r}")
+    if not all(x in GAIN for x in g.tolist()):
+        raise GainError(f"{what} {g.tolist()} are outside the supported range {GAIN.text()}")
     return g
 
 

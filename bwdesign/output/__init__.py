@@ -1,3 +1,26 @@
-"""Output layer: strict JSON encoding (and, below every writer, file output)."""
+"""Output layer: strict JSON encoding and safe file output (every writer goes through it).
 
-__all__ = []
+See :mod:`bwdesign.output.files` for the rules: directory outputs with a
+manifest (:func:`prepare_directory`), single files with a signature line
+(:func:`prepare_file`), atomic writes, nothing foreign ever replaced.
+"""
+
+from .files import (
+    MANIFEST,
+    DirectoryTarget,
+    FileTarget,
+    Stage,
+    prepare_directory,
+    prepare_file,
+    signature_line,
+)
+
+__all__ = [
+    "MANIFEST",
+    "DirectoryTarget",
+    "FileTarget",
+    "Stage",
+    "prepare_directory",
+    "prepare_file",
+    "signature_line",
+]

@@ -3,9 +3,10 @@
 :func:`write_report` turns a :class:`~bwdesign.model.config.StageConfig` into a
 directory holding ``report.md``, a self-contained ``report.html``,
 ``certificate.json`` and ``figures/*.png``. Everything is computed here from
-the configuration; nothing is edited by hand. The directory is built under a
-temporary name beside the target and moved into place at the end, so an error
-never leaves a half-written report.
+the configuration; nothing is edited by hand. The directory is written through
+:mod:`bwdesign.output.files`: staged inside the target and moved into place at
+the end, so an error never leaves a half-written report, and no file bwdesign
+did not write is ever touched.
 
 The numbers in ``certificate.json`` come from :func:`certificate_document`,
 which the determinism test re-runs and compares with the committed file.
@@ -14,11 +15,8 @@ which the determinism test re-runs and compares with the committed file.
 from __future__ import annotations
 
 import math
-import os
 import platform
-import shutil
 import sys
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -40,6 +38,7 @@ from ..model.envelope import Envelope
 from ..model.params import require_bounded
 from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
+from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from .document import Document
 from .tracking import TrackingRun, input_limits, required_input, tracking_runs
@@ -48,6 +47,9 @@ __all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DEC
 
 #: Decay rate (1/s) requested from synthesis when the config has no [synthesis] decay.
 DEFAULT_DECAY = 100.0
+
+#: Files every report holds (checked against foreign files before any work).
+REPORT_FILES = ("report.md", "report.html", "certificate.json")
 
 TIER_MEANING = {
     "theorem1": (
@@ -721,8 +723,14 @@ def write_report(
     allow_unbounded: bool = False,
     quiet: bool = False,
     date: str | None = None,
+    force: bool = False,
 ) -> ReportOutcome:
-    """Write the report for ``config`` into ``out_dir`` (replacing it atomically).
+    """Write the report for ``config`` into ``out_dir`` through the safe output layer.
+
+    ``out_dir`` is checked before any work (:func:`bwdesign.output.prepare_directory`):
+    it must be new, empty or a report bwdesign wrote before (its manifest);
+    the files are computed in a staging directory inside it and moved into
+    place at the end, so an error or a kill leaves the previous report whole.
 
     Parameters
     ----------
@@ -735,6 +743,9 @@ def write_report(
         No progress lines on stderr.
     date : str, optional
         Date line (default: now, UTC).
+    force : bool
+        Write into a directory that holds files bwdesign did not write; they
+        are kept, never overwritten.
 
     Returns
     -------
@@ -744,27 +755,18 @@ def write_report(
     ------
     ConfigError
         A section the report needs is missing.
+    OutputError
+        ``out_dir`` cannot be written safely (checked before any work), or the
+        operating system refused a write (the previous report is then intact).
     """
-    out_dir = Path(out_dir)
-    parent = out_dir.resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
-    try:
+    target = prepare_directory(
+        out_dir, command="report", force=force, what="--out", expect=REPORT_FILES
+    )
+    with target.stage() as stage:
         doc, cert_doc, ok, verdict = build_report(
-            config, tmp, allow_unbounded=allow_unbounded, quiet=quiet, date=date
+            config, stage.root, allow_unbounded=allow_unbounded, quiet=quiet, date=date
         )
-        (tmp / "certificate.json").write_text(dump_json(cert_doc) + "\n")
-        (tmp / "report.md").write_text(doc.to_markdown())
-        (tmp / "report.html").write_text(doc.to_html(tmp))
-        os.chmod(tmp, 0o755)
-        old = None
-        if out_dir.exists():
-            old = parent / f".{out_dir.name}.old-{os.getpid()}"
-            out_dir.rename(old)
-        tmp.rename(out_dir)
-        if old is not None:
-            shutil.rmtree(old)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return ReportOutcome(out_dir=out_dir, certified=ok, verdict=verdict)
+        stage.write_text("certificate.json", dump_json(cert_doc) + "\n")
+        stage.write_text("report.md", doc.to_markdown())
+        stage.write_text("report.html", doc.to_html(stage.root))
+    return ReportOutcome(out_dir=Path(out_dir), certified=ok, verdict=verdict)

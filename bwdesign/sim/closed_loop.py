@@ -13,10 +13,11 @@ import numpy as np
 from ..control.controllers import TrackingController, TuningWarning, make_controller, solve_jump
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import _check_dt, discretize, hysteresis_increment
+from ..model.plant import check_sample_time, discretize, hysteresis_increment
 from ..model.references import Reference
 from ..observers.gains import _as_gains, check_gains
 from ..observers.sampled import ExtendedStateObserver, HysteresisObserver
+from ..validate import SEED, integer
 from .metrics import steady_state_window, tracking_metrics
 from .result import SimulationResult
 
@@ -353,14 +354,13 @@ def simulate(
         raise InputError("true_params must be a BoucWenParams")
     require_bounded(params, allow_unbounded)
     require_bounded(tp, allow_unbounded)
-    dt = _check_dt(dt)
+    dt = check_sample_time(tp, check_sample_time(params, dt))
     duration = _finite_nonneg(duration, "duration (s)")
     n = int(round(duration / dt))
     if n < 2:
         raise InputError(f"duration {duration:g} s holds fewer than 2 samples of dt = {dt:g} s")
     noise_std = _finite_nonneg(noise_std, "noise_std")
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
-        raise InputError(f"seed must be an integer, got {seed!r}")
+    seed = integer(seed, "seed", within=SEED)
     x0 = _state(x0, "x0")
     xhat0 = _state(xhat0, "xhat0")
     if isinstance(u_prev, bool) or not isinstance(u_prev, numbers.Real):

@@ -1,0 +1,370 @@
+"""A named table of bad inputs: each one exit 2, one ``error:`` line, nothing written.
+
+Every case runs ``bwdesign.cli.main`` in-process from inside ``tmp_path``;
+the files a case needs (stage TOML files, a user's notes, a FIFO, a symlink,
+a read-only file, a locked directory) are made there by the test. Checked for
+each: exit code 2, nothing on stdout, the last stderr line starts with
+``error:`` and is the only such line, no ``Traceback`` and no ``Warning`` on
+stderr, no warning raised (recorded: under pytest warnings never reach stderr),
+and the directory holds exactly what it held before.
+
+``python tests/test_bad_inputs.py`` prints the table with each case's error line.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bwdesign import BoucWenParams, Sine, certify, preset, simulate, synthesize
+from bwdesign.cli.main import main
+from bwdesign.errors import ConfigError, InputError, ParameterError
+from bwdesign.validate import DT, SEED, integer, parse_real, real
+
+ROOT = Path(__file__).resolve().parents[1]
+GOOD_TOML = (ROOT / "configs" / "paper_experiment.toml").read_text()
+PLANT = """[plant]
+name = "t"
+a1 = 159827.5
+a2 = 713.8
+a3 = 222665.02
+alpha = 0.4795
+beta = 0.3762
+gamma = 0.0378
+"""
+GAINS = ["--gains", "8,64,-512"]
+CERT = ["certify", "--plant", "paper_experiment", *GAINS, "--udot-max", "361"]
+SYN = ["synthesize", "--plant", "paper_experiment", "--udot-max", "400"]
+SIM = [
+    "simulate", "--plant", "paper_experiment", *GAINS, "--amplitude", "80", "--offset", "100",
+    "--frequency", "1", "--lambda1", "1", "--lambda2", "2", "--dt", "2e-4", "--duration", "0.01",
+]  # fmt: skip
+REPORT = ["report", "--config", "stage.toml", "--out", "rep", "--quiet"]
+
+
+def sim(**changes: str) -> list[str]:
+    """``SIM`` with some options changed (``u_min="5"`` sets ``--u-min 5``)."""
+    argv = list(SIM)
+    for key, value in changes.items():
+        opt = "--" + key.replace("_", "-")
+        if opt in argv:
+            argv[argv.index(opt) + 1] = value
+        else:
+            argv += [opt, value]
+    return argv
+
+
+def _stage(text: str | bytes) -> Callable[[Path], None]:
+    def make(tmp: Path) -> None:
+        data = text.encode() if isinstance(text, str) else text
+        (tmp / "stage.toml").write_bytes(data)
+
+    return make
+
+
+def _good(tmp: Path) -> None:
+    _stage(GOOD_TOML)(tmp)
+
+
+def _user_dir(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "mydir").mkdir()
+    (tmp / "mydir" / "notes.txt").write_text("my notes\n")
+
+
+def _user_file(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "afile").write_text("my file\n")
+
+
+def _symlinks(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "real.csv").write_text("my data\n")
+    (tmp / "link.csv").symlink_to(tmp / "real.csv")
+    (tmp / "realdir").mkdir()
+    (tmp / "linkdir").symlink_to(tmp / "realdir", target_is_directory=True)
+
+
+def _fifo(tmp: Path) -> None:
+    os.mkfifo(tmp / "pipe")
+
+
+def _read_only(tmp: Path) -> None:
+    (tmp / "ro.csv").write_text("# written by bwdesign 0 (simulate --csv) sha256=0\n")
+    (tmp / "ro.csv").chmod(0o444)
+
+
+def _locked(tmp: Path) -> None:
+    _good(tmp)
+    (tmp / "locked").mkdir()
+    (tmp / "locked").chmod(0o555)
+
+
+def _replace(old: str, new: str) -> Callable[[Path], None]:
+    assert old in GOOD_TOML, old
+    return _stage(GOOD_TOML.replace(old, new))
+
+
+def _plant(old: str, new: str, extra: str = "") -> Callable[[Path], None]:
+    assert old in PLANT, old
+    return _stage(PLANT.replace(old, new) + extra)
+
+
+STAGE = ["--plant", "stage.toml"]
+CERT_STAGE = ["certify", *STAGE, *GAINS, "--udot-max", "361"]
+ENV = "from_reference = true\nmargin = 1.1"
+
+#: (name, argv, setup, part of the error line)
+CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
+    # -- the issue's cases -----------------------------------------------------
+    ("report into a dir with a user's file", [*REPORT[:4], "mydir"], _user_dir, "notes.txt"),
+    ("report into a plain file", [*REPORT[:4], "afile"], _user_file, "not a directory"),
+    ("report --out .", [*REPORT[:4], "."], _good, "current directory"),
+    ("report --out ''", [*REPORT[:4], ""], _good, "empty path"),
+    ("report --out in a locked dir", [*REPORT[:4], "locked/x"], _locked, "not writable"),
+    ("report --out below a file", [*REPORT[:4], "afile/sub"], _user_file, "not a directory"),
+    ("simulate --csv below a file", [*SIM, "--csv", "afile/x.csv"], _user_file, "not a directory"),
+    ("report --out symlink", [*REPORT[:4], "linkdir"], _symlinks, "symbolic link"),
+    ("report --out FIFO", [*REPORT[:4], "pipe", "--force"], _fifo, "FIFO"),
+    ("simulate --seed -3", [*SIM, "--seed", "-3"], None, "seed = -3 is outside"),
+    ("simulate --seed 1.5", [*SIM, "--seed", "1.5"], None, "expected an integer"),
+    ("certify a1 = 1e308", CERT_STAGE, _plant("a1 = 159827.5", "a1 = 1e308"), "a1 = 1e+308"),
+    ("simulate --csv symlink", [*SIM, "--csv", "link.csv"], _symlinks, "symbolic link"),
+    ("simulate --csv read-only", [*SIM, "--csv", "ro.csv"], _read_only, "read-only"),
+    ("simulate --csv FIFO", [*SIM, "--csv", "pipe"], _fifo, "FIFO"),
+    ("simulate --csv user's file", [*SIM, "--csv", "afile"], _user_file, "never overwrites"),
+    ("simulate --csv ''", [*SIM, "--csv", ""], None, "empty path"),
+    ("simulate --csv a directory", [*SIM, "--csv", "mydir"], _user_dir, "directory"),
+    ("simulate --csv in a locked dir", [*SIM, "--csv", "locked/x.csv"], _locked, "not writable"),
+    ("simulate --csv missing dir", [*SIM, "--csv", "nodir/x.csv"], None, "does not exist"),
+    ("certify --udot-max 1e300", [*CERT[:-1], "1e300"], None, "udot_max (V/s) = 1e+300"),
+    ("synthesize --udot-max 1e300", [*SYN[:-1], "1e300"], None, "udot_max (V/s) = 1e+300"),
+    ("certify --dt 1", [*CERT, "--dt", "1"], None, "dt = 1 s is too long"),
+    ("simulate --dt 1", sim(dt="1", duration="10"), None, "too long"),
+    ("report dt = 1 in TOML", REPORT, _replace("dt = 0.0002", "dt = 1.0"), "too long"),
+    # -- kept from before: already clean ---------------------------------------
+    ("unknown preset", ["params", "--plant", "no_such_stage"], None, "unknown plant preset"),
+    ("empty --plant", ["params", "--plant", ""], None, "unknown plant preset ''"),
+    ("empty --config", [*REPORT[:2], "", *REPORT[3:]], None, "empty path"),
+    ("missing key", ["params", *STAGE], _plant("a2 = 713.8\n", ""), "missing field(s) a2"),
+    ("negative dt", [*CERT, "--dt", "-1"], None, "expected a positive number"),
+    (
+        "malformed gains",
+        ["certify", "--plant", "paper_experiment", "--gains", "1,2", "--udot-max", "361"],
+        None,
+        "three comma-separated",
+    ),  # fmt: skip
+    (
+        "unbounded parameters",
+        ["certify", "--plant", "paper_simulation", *GAINS, "--udot-max", "1"],
+        None,
+        "outside the bounded",
+    ),  # fmt: skip
+    # -- more ranges and types -------------------------------------------------
+    ("certify --dt 1e-12", [*CERT, "--dt", "1e-12"], None, "dt (s) = 1e-12 is outside"),
+    ("certify --decay 1e300", [*CERT, "--decay", "1e300"], None, "decay (1/s) = 1e+300"),
+    ("synthesize --pole-radius 1e300", [*SYN, "--pole-radius", "1e300"], None, "pole_radius"),
+    (
+        "certify gain 1e300",
+        ["certify", "--plant", "paper_experiment", "--gains", "8,64,-1e300", "--udot-max", "361"],
+        None,
+        "supported range",
+    ),  # fmt: skip
+    (
+        "certify gain nan",
+        ["certify", "--plant", "paper_experiment", "--gains", "nan,64,-512", "--udot-max", "361"],
+        None,
+        "finite",
+    ),  # fmt: skip
+    ("simulate --amplitude 1e300", sim(amplitude="1e300"), None, "amplitude = 1e+300"),
+    ("simulate --frequency 1e300", sim(frequency="1e300"), None, "frequency = 1e+300"),
+    ("simulate --lambda1 0", sim(lambda1="0"), None, "expected a positive number"),
+    ("simulate --noise-std -1", [*SIM, "--noise-std", "-1"], None, "expected a number >= 0"),
+    ("simulate --u-min > --u-max", [*SIM, "--u-min", "5", "--u-max", "1"], None, "u_min < u_max"),
+    ("simulate --offset nan", sim(offset="nan"), None, "expected a finite number"),
+    ("simulate --duration 1e300", sim(duration="1e300"), None, "exceeds the limit"),
+    (
+        "simulate unbounded --true-plant",
+        [*SIM, "--true-plant", "paper_simulation"],
+        None,
+        "outside the bounded",
+    ),
+    ("a3 = 1e-300", ["params", *STAGE], _plant("a3 = 222665.02", "a3 = 1e-300"), "|a3|"),
+    ("beta = 1e300", ["params", *STAGE], _plant("beta = 0.3762", "beta = 1e300"), "beta = 1e+300"),
+    (
+        "physical m = 1e-300",
+        ["params", *STAGE],
+        _stage(
+            "[plant]\nm = 1e-300\nb = 1.0\nk = 1.0\nd = 1.0\nalpha0 = 1.0\n"
+            "beta = 0.2\ngamma = 0.1\n"
+        ),
+        "m = 1e-300",
+    ),  # fmt: skip
+    ("a1 is a bool", ["params", *STAGE], _plant("a1 = 159827.5", "a1 = true"), "a1 must be"),
+    ("a1 is a string", ["params", *STAGE], _plant("a1 = 159827.5", 'a1 = "1e5"'), "a1 must be"),
+    (
+        "reference kind is a list",
+        ["params", *STAGE],
+        _plant("gamma = 0.0378", "gamma = 0.0378", "[reference]\nkind = [1]\namplitude = 1.0\n"),
+        "kind must be one of",
+    ),  # fmt: skip
+    ("bad UTF-8", ["params", *STAGE], _stage(b'[plant]\nname = "\xff\xfe"\n'), "malformed TOML"),
+    ("stage file is a directory", ["params", "--plant", "mydir"], _user_dir, "not a regular"),
+    ("stage file is a FIFO", ["params", "--plant", "pipe"], _fifo, "not a regular file"),
+    ("huge stage file", ["params", *STAGE], _stage(PLANT + "#" * (1 << 21)), "at most"),
+    (
+        "huge gains list",
+        ["params", *STAGE],
+        _stage(PLANT + "[observer]\ngains = [" + "1.0, " * 50000 + "]\n"),
+        "gains must be a list of 3 numbers",
+    ),
+    ("report udot_max 1e300", REPORT, _replace(ENV, "udot_max = 1e300"), "udot_max (V/s)"),
+    ("report margin 1e300", REPORT, _replace("margin = 1.1", "margin = 1e300"), "margin"),
+    ("report decay -1", REPORT, _stage(GOOD_TOML + "[synthesis]\ndecay = -1.0\n"), "decay"),
+    ("report missing config", REPORT, None, "does not exist"),
+    (
+        "report gains strings",
+        REPORT,
+        _replace("[8.0, 64.0, -512.0]", '["8", 64, -512]'),
+        "gains[0] must be a number",
+    ),  # fmt: skip
+    ("unknown subcommand", ["frobnicate"], None, "invalid choice"),
+]
+
+
+def snapshot(path: Path) -> dict[str, object]:
+    out: dict[str, object] = {}
+    for p in sorted(path.rglob("*")):
+        st = os.lstat(p)
+        key = p.relative_to(path).as_posix()
+        out[key] = p.read_bytes() if stat.S_ISREG(st.st_mode) else stat.filemode(st.st_mode)
+    return out
+
+
+def run_case(tmp: Path, argv: list[str], setup, capsys) -> tuple[int, str, str]:
+    if setup is not None:
+        setup(tmp)
+    before = snapshot(tmp)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")  # pytest would otherwise swallow them
+            code = main(argv)
+        assert not caught, [str(w.message) for w in caught]
+        out, err = capsys.readouterr()
+        assert snapshot(tmp) == before, "something was written"
+    finally:
+        if (tmp / "locked").exists():
+            (tmp / "locked").chmod(0o755)
+    return code, out, err
+
+
+def test_the_table_is_long_enough():
+    assert len(CASES) >= 40
+    assert len({c[0] for c in CASES}) == len(CASES)
+
+
+@pytest.mark.parametrize("name, argv, setup, message", CASES, ids=[c[0] for c in CASES])
+def test_bad_input(tmp_path, monkeypatch, capsys, name, argv, setup, message):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_case(tmp_path, argv, setup, capsys)
+    assert code == 2, err
+    assert out == ""
+    lines = err.splitlines()
+    assert lines and lines[-1].startswith("error: "), err
+    assert sum(ln.startswith("error: ") for ln in lines) == 1
+    assert "Traceback" not in err and "Warning" not in err
+    assert message in lines[-1], lines[-1]
+
+
+if __name__ == "__main__":  # print the table: input, exit code, error line
+    import contextlib
+    import io
+    import shlex
+    import tempfile
+
+    for name, argv, setup, _ in CASES:
+        with tempfile.TemporaryDirectory() as d:
+            os.chdir(d)
+            if setup is not None:
+                setup(Path(d))
+            err = io.StringIO()
+            try:
+                with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                    code = main(argv)
+            finally:
+                if (Path(d) / "locked").exists():
+                    (Path(d) / "locked").chmod(0o755)
+                os.chdir(ROOT)
+            line = err.getvalue().strip().splitlines()[-1]
+            print(f"| {name} | `bwdesign {shlex.join(argv)}` | {code} | {line} |")
+
+
+# -- the same checks in Python -------------------------------------------------------
+
+
+EXP = dict(a1=159827.5, a2=713.8, a3=222665.02, alpha=0.4795, beta=0.3762, gamma=0.0378)
+P = preset("paper_experiment")
+SINE = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
+LOOP = dict(dt=2e-4, duration=0.01, gains=(8, 64, -512), lambda1=1.0, lambda2=2.0)
+
+PYTHON = [
+    ("a1 = 1e308", lambda: BoucWenParams(**{**EXP, "a1": 1e308}), ParameterError, r"\[1e-06"),
+    (
+        "a1 numpy bool",
+        lambda: BoucWenParams(**{**EXP, "a1": np.bool_(True)}),
+        ParameterError,
+        "must be a number",
+    ),  # fmt: skip
+    ("a1 str", lambda: BoucWenParams(**{**EXP, "a1": "1e5"}), ParameterError, "must be a number"),
+    (
+        "udot_max 1e300",
+        lambda: certify(P, (8, 64, -512), udot_max=np.float64(1e300)),
+        InputError,
+        "supported range",
+    ),  # fmt: skip
+    ("dt 1", lambda: certify(P, (8, 64, -512), udot_max=361, dt=1), InputError, "too long"),
+    ("synthesize dt 1", lambda: synthesize(P, udot_max=361, dt=1.0), InputError, "too long"),
+    (
+        "simulate dt 1",
+        lambda: simulate(P, SINE, **{**LOOP, "dt": 1.0, "duration": 10.0}),
+        InputError,
+        "too long",
+    ),  # fmt: skip
+    ("seed -3", lambda: simulate(P, SINE, **LOOP, seed=-3), InputError, "seed = -3"),
+    ("seed 3.0", lambda: simulate(P, SINE, **LOOP, seed=3.0), InputError, "must be an integer"),
+    ("seed True", lambda: simulate(P, SINE, **LOOP, seed=True), InputError, "must be an integer"),
+    ("amplitude 1e300", lambda: Sine(amplitude=1e300, frequency=1.0), ConfigError, "range"),
+    ("gains str", lambda: certify(P, ("8", 64, -512), udot_max=361), ValueError, "numbers"),
+]
+
+
+@pytest.mark.parametrize("name, call, error, match", PYTHON, ids=[c[0] for c in PYTHON])
+def test_python_entry_points(name, call, error, match):
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(error, match=match):
+            call()
+
+
+def test_validate_semantics():
+    assert real(np.float32(0.5), "x", within=DT) == 0.5
+    assert real(np.int64(3), "x") == 3.0 and integer(np.uint8(7), "n", within=SEED) == 7
+    for bad in (True, "1", None, [1.0], complex(1, 0)):
+        with pytest.raises(InputError, match="must be a number"):
+            real(bad, "x")
+    for bad in (3.0, True, "3", np.float64(3)):
+        with pytest.raises(InputError, match="must be an integer"):
+            integer(bad, "n")
+    with pytest.raises(InputError, match="must be finite"):
+        real(float("nan"), "x")
+    with pytest.raises(InputError, match=r"outside the supported range \[1e-09, 1\] s"):
+        parse_real("2", "dt", within=DT)
+    with pytest.raises(ParameterError) as info:
+        real(-1.0, "owner: a2", within=DT, error=ParameterError)
+    assert info.value.field == "a2"
