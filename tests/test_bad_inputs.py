@@ -224,7 +224,12 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         _stage(PLANT + "[observer]\ngains = [" + "1.0, " * 50000 + "]\n"),
         "gains must be a list of 3 numbers",
     ),
-    ("report udot_max 1e300", REPORT, _replace(ENV, "udot_max = 1e300"), "udot_max (V/s)"),
+    (
+        "report udot_max 1e300",
+        REPORT,
+        _replace(ENV, "udot_max = 1e300"),
+        "[envelope] udot_max (input unit/s) = 1e+300 is outside the supported range",
+    ),
     ("report margin 1e300", REPORT, _replace("margin = 1.1", "margin = 1e300"), "margin"),
     ("report decay -1", REPORT, _stage(GOOD_TOML + "[synthesis]\ndecay = -1.0\n"), "decay"),
     ("report missing config", REPORT, None, "does not exist"),
