@@ -21,6 +21,7 @@ LAYERS = (
     ("errors", "_version"),
     ("output", "plotting"),
     ("model",),
+    ("identify",),
     ("observers",),
     ("control",),
     ("certify",),

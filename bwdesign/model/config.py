@@ -10,6 +10,7 @@ One file per stage; only ``[plant]`` is required::
     [envelope]     udot_max (V/s), or from_reference = true with optional margin >= 1
     [reference]    kind = "sine" | "triangle" | "step", amplitude, offset, frequency, ...
     [synthesis]    decay (1/s) and pole_radius (rad/s) asked of the gain synthesis in reports
+    [uncertainty]  per-parameter half-widths (bwdesign.model.uncertainty)
 
 Unknown sections and keys are errors that name the allowed ones.
 """
@@ -27,6 +28,7 @@ from ..errors import BWDesignError, ConfigError, ParameterError
 from .envelope import Envelope, derive_envelope, given_envelope
 from .params import PRESETS, BoucWenParams, preset
 from .references import Reference, reference_from_dict
+from .uncertainty import UncertaintyBox
 
 __all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant"]
 
@@ -38,6 +40,7 @@ _SECTIONS = {
     "envelope": {"udot_max", "from_reference", "margin"},
     "reference": None,  # checked per kind
     "synthesis": {"decay", "pole_radius"},
+    "uncertainty": None,  # checked by UncertaintyBox.from_dict
 }
 
 
@@ -76,6 +79,8 @@ class StageConfig:
         The ``[envelope]`` table as given; see :meth:`envelope`.
     synthesis : dict or None
         ``decay`` (1/s) and ``pole_radius`` (rad/s) for the report's gain synthesis.
+    uncertainty : UncertaintyBox or None
+        The ``[uncertainty]`` section (None when absent).
     source : str
         Path of the file.
     sha256 : str
@@ -89,6 +94,7 @@ class StageConfig:
     reference: Reference | None = None
     envelope_spec: dict[str, Any] | None = None
     synthesis: dict[str, float] | None = None
+    uncertainty: UncertaintyBox | None = None
     source: str = ""
     sha256: str = ""
 
@@ -209,6 +215,10 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         if synthesis.get("decay", 0.0) < 0:
             raise ConfigError(f"[synthesis] decay must be >= 0 (1/s), got {synthesis['decay']:g}")
 
+    uncertainty = None
+    if "uncertainty" in data:
+        uncertainty = UncertaintyBox.from_dict(data["uncertainty"])
+
     return StageConfig(
         plant=plant,
         gains=gains,
@@ -217,6 +227,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         reference=reference,
         envelope_spec=env,
         synthesis=synthesis,
+        uncertainty=uncertainty,
         source=source,
         sha256=sha256,
     )
