@@ -7,15 +7,20 @@ Steps (each is seeded and deterministic):
    the initial hysteresis state) is solved for gain, alpha, offset and initial
    state by linear least squares (the model is linear in them: ``h`` scales
    with ``alpha``). A second grid over resonance, damping and an integer input
-   delay of 0..3 samples follows, then the hysteresis grid once more.
+   grid over resonance and damping follows, then the hysteresis grid once more.
 2. **Refine** all coordinates of :mod:`bwdesign.identify.problem` with
    ``scipy.optimize.least_squares`` (trust-region reflective) from the best
    start and from seeded perturbations of it (``multistart``).
 3. **Identifiability.** If the resonance is not determined by the data (its
-   95 % half-width exceeds 50 %, as on a slow sine logged below the
-   resonance) it is held at the prior (``init``'s a1, or the stated default
-   ``wn = max(pi/dt, 2/tau)``: at or above the Nyquist frequency and at least
-   critically damped for the fitted lag) and the rest is refitted.
+   95 % half-width exceeds 50 %, or less than 1e-4 of the input's power lies
+   between a third and three times it, as on a slow sine: a local interval
+   alone can look tight on such data while the truth lies elsewhere) it is
+   held at the prior: ``init``'s a1; else the free fit's value when that lies
+   below the Nyquist frequency with a tight local interval (the low-frequency
+   curvature of the response placed it); else the stated default
+   ``wn = max(pi/dt, 2/tau)``, at or above the Nyquist frequency and at least
+   critically damped for the fitted lag. The rest is refitted and a1, a2, a3
+   are reported as not determined.
 4. **Intervals** from the Jacobian at the optimum (see
    :mod:`bwdesign.identify.result`).
 """
@@ -41,6 +46,9 @@ NAMES = ("a1", "a2", "a3", "alpha", "beta", "gamma")
 #: A coordinate is "determined" when its 95 % half-width is below this fraction.
 DETERMINED_REL = 0.5
 _DELAYS = (0, 1, 2, 3)
+#: Least share of the input's power within a third and three times the fitted
+#: resonance for the resonance to count as seen (besides a tight interval).
+MIN_BAND_FRACTION = 1e-4
 #: chi-square(1) quantile at 0.999: the misfit drop a delay must buy.
 _LR_DELAY = 10.83
 
@@ -306,26 +314,31 @@ def identify(
     resonance_held = None
     if free[IW]:
         rel = _rel_halfwidth(prob, theta, free, IW)
-        if not rel < DETERMINED_REL:
+        f_r = math.exp(theta[IW]) / (2 * math.pi)
+        band = _band_fraction(data.u, data.dt, f_r / 3.0, 3.0 * f_r)
+        say(f"  resonance {f_r:.4g} Hz: input power within [f/3, 3f]: {band:.3g} of the total")
+        if not (rel < DETERMINED_REL and band >= MIN_BAND_FRACTION):
             tau = math.exp(theta[ITAU])
-            wn_prior = (
-                math.sqrt(prior.a1) if prior is not None else max(math.pi / data.dt, 2.0 / tau)
-            )
-            resonance_held = (
-                "init" if prior is not None else "default",
-                wn_prior,
-                rel,
-            )
+            if prior is not None:
+                src, wn_hold = "init", math.sqrt(prior.a1)
+            elif rel < DETERMINED_REL and f_r < 0.5 / data.dt:
+                # the low-frequency curvature placed it inside the record's band: a
+                # guess worth keeping, but not a determination
+                src, wn_hold = "curvature", math.exp(theta[IW])
+            else:
+                src, wn_hold = "default", max(math.pi / data.dt, 2.0 / tau)
+            resonance_held = (src, wn_hold, rel, band)
             say(
                 f"  the resonance is not determined by these data (95 % half-width "
-                f"{100 * rel:.3g} % of sqrt(a1)); holding it at {wn_prior / (2 * math.pi):.4g} Hz"
+                f"{100 * rel:.3g} % of sqrt(a1)); holding it at {wn_hold / (2 * math.pi):.4g} Hz"
             )
-            free = free.copy()
-            free[IW] = False
-            theta = theta.copy()
-            theta[IW] = math.log(wn_prior)
-            theta, sol = _refine(prob, theta, free, max_nfev)
-            nfev += sol.nfev
+            if src != "curvature":  # else keep the free fit (and its wider intervals)
+                free = free.copy()
+                free[IW] = False
+                theta = theta.copy()
+                theta[IW] = math.log(wn_hold)
+                theta, sol = _refine(prob, theta, free, max_nfev)
+                nfev += sol.nfev
     return build_result(
         prob,
         theta,
@@ -341,6 +354,18 @@ def identify(
         seconds=time.perf_counter() - tic,
         delayed=_delayed,
     )
+
+
+def _band_fraction(u: np.ndarray, dt: float, f_lo: float, f_hi: float) -> float:
+    """Share of the power of the detrended input within ``[f_lo, f_hi]`` Hz."""
+    k = np.arange(u.size)
+    x = u - np.polyval(np.polyfit(k, u, 1), k)
+    power = np.abs(np.fft.rfft(x)) ** 2
+    f = np.fft.rfftfreq(u.size, dt)
+    total = float(power[1:].sum())
+    if total == 0.0:
+        return 0.0
+    return float(power[(f >= f_lo) & (f <= f_hi)].sum() / total)
 
 
 def _rel_halfwidth(prob: Problem, theta: np.ndarray, free: np.ndarray, index: int) -> float:

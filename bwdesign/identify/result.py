@@ -214,7 +214,7 @@ def _diagnose(
     rel: dict[str, float],
     corr: np.ndarray,
     derived: dict[str, dict[str, float]],
-    resonance_held: tuple[str, float, float] | None,
+    resonance_held: tuple[str, float, float, float] | None,
     delay: int,
     theta: np.ndarray,
     r_acf1: float,
@@ -223,17 +223,25 @@ def _diagnose(
     notes: list[str] = []
     f_nyq = 0.5 / dt
     if resonance_held is not None:
-        src, wn, rel_w = resonance_held
+        src, wn, rel_w, band = resonance_held
         k, tau = derived["static_gain"], derived["lag"]
-        held = "init's value" if src == "init" else "the stated default max(pi/dt, 2/lag)"
+        held = {
+            "init": "init's value",
+            "curvature": "the free fit's value (a guess from the low-frequency curvature)",
+            "default": "the stated default max(pi/dt, 2/lag)",
+        }[src]
         notes.append(
             f"The resonance and the damping are NOT determined by these data (a free fit "
-            f"gives sqrt(a1) a 95 % half-width of {_pct(rel_w)}): the input has no usable "
-            f"content near the resonance (the record resolves up to the Nyquist frequency "
-            f"{f_nyq:.4g} Hz). a1 is held at {held}, {wn / (2 * math.pi):.4g} Hz, and a1, a2 "
+            f"gives sqrt(a1) a 95 % half-width of {_pct(rel_w)}, and only {band:.2g} of the "
+            f"input's power lies within a factor 3 of the resonance it found): the input "
+            f"has no usable content near the resonance (the record resolves up to the "
+            f"Nyquist frequency {f_nyq:.4g} Hz). a1 is held at {held}, "
+            f"{wn / (2 * math.pi):.4g} Hz, and a1, a2 "
             f"and a3 are reported as not determined (infinite intervals). What the data do "
             f"determine: static gain a3/a1 = {k['value']:.6g} ± {Z95 * k['std_err']:.2g} µm/V "
-            f"and lag a2/a1 = {tau['value']:.4g} ± {Z95 * tau['std_err']:.2g} s. Before "
+            f"and the effective lag a2/a1 = {tau['value']:.4g} ± {Z95 * tau['std_err']:.2g} s "
+            f"(given the held resonance; it also absorbs the sampled response of the real "
+            f"one). Before "
             f"certifying, identify the resonance with `bwdesign excite` at a sample rate "
             f"several times above it, or give the stage's a1 with --init."
         )
@@ -344,7 +352,7 @@ def build_result(
     data: Any,
     validation: Any,
     delay: int,
-    resonance_held: tuple[str, float, float] | None,
+    resonance_held: tuple[str, float, float, float] | None,
     name: str,
     nfev: int,
     n_starts: int,

@@ -6,8 +6,8 @@ independent), not on ``(x1, x2)``; the linear part is driven by
 ``h`` (:func:`hysteresis_path`, the closed form of
 :func:`bwdesign.model.plant.hysteresis_increment` inlined) and a second-order
 IIR filter for ``x1`` (:func:`linear_response`, scipy's ``lfilter`` on the
-transfer function of the exact ZOH matrices, computed as in
-:func:`bwdesign.model.plant.discretize`). A fit changes the linear parameters
+transfer function of the exact ZOH matrices of
+:func:`bwdesign.model.plant.discretize`, in closed form). A fit changes the linear parameters
 far more often than the hysteresis ones, and then only the cheap filter reruns.
 ``tests/test_identify_core.py`` checks both against
 :func:`bwdesign.simulate_zoh` to 1e-10.
@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import expm
 from scipy.signal import lfilter, lfiltic
 
 from ..model.params import BoucWenParams
@@ -89,15 +88,31 @@ def linear_matrices(a1: float, a2: float, dt: float) -> tuple[np.ndarray, np.nda
     """``Phi`` (2x2) and the unit-DC-gain input vector of the exact ZOH linear part.
 
     ``[x1, x2]_{k+1} = Phi [x1, x2]_k + b (K u_k - h_k)``, with ``b = a1 Gamma`` so
-    that a constant drive ``w`` settles at ``x1 = w``. The same balanced matrix
-    exponential as :func:`bwdesign.model.plant.discretize` (without its cache
-    and parameter validation, which a fit would call thousands of times).
+    that a constant drive ``w`` settles at ``x1 = w``. Closed form of the same
+    matrix exponential as :func:`bwdesign.model.plant.discretize` (a fit needs
+    it thousands of times): with ``mu = -a2/2`` and ``d^2 = a2^2/4 - a1``,
+    ``expm(A dt) = e^{mu dt} (c I + s (A - mu I))``, ``c = cosh(d dt)``,
+    ``s = sinh(d dt)/d`` (cos and sin for ``d^2 < 0``), and
+    ``b = A^{-1} (Phi - I) [0, a1]``.
     """
-    w0 = math.sqrt(a1)
-    mz = np.array([[0.0, w0, 0.0], [-w0, -a2, w0], [0.0, 0.0, 0.0]])
-    e = expm(mz * dt)
-    phi = np.array([[e[0, 0], e[0, 1] / w0], [e[1, 0] * w0, e[1, 1]]])
-    return phi, np.array([e[0, 2], e[1, 2] * w0])
+    mu = -0.5 * a2
+    d2 = 0.25 * a2 * a2 - a1
+    q = d2 * dt * dt
+    if abs(q) < 1e-8:  # near critical damping: series of cosh/cos and sinh/sin
+        e = math.exp(mu * dt)
+        ec, es = e * (1.0 + 0.5 * q), e * dt * (1.0 + q / 6.0)
+    elif d2 > 0.0:
+        # e^{(mu +- d) dt} separately: no overflow of cosh when heavily overdamped
+        d = math.sqrt(d2)
+        ep, em = math.exp((mu + d) * dt), math.exp((mu - d) * dt)
+        ec, es = 0.5 * (ep + em), 0.5 * (ep - em) / d
+    else:
+        om = math.sqrt(-d2)
+        e = math.exp(mu * dt)
+        ec, es = e * math.cos(om * dt), e * math.sin(om * dt) / om
+    h = 0.5 * a2 * es
+    phi = np.array([[ec + h, es], [-a1 * es, ec - h]])
+    return phi, np.array([1.0 - ec - h, a1 * es])
 
 
 def linear_response(phi: np.ndarray, b: np.ndarray, w: np.ndarray, x0: np.ndarray) -> np.ndarray:
