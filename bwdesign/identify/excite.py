@@ -8,8 +8,10 @@ An input that identifies all six parameters needs two things at once:
 - **content around the resonance** (0.3 to 3 times the guessed natural
   frequency), so a1 and a2 are seen, not assumed.
 
-``multisine``: a slow two-tone sweep of the range (f0 = 3/duration and 3.3 f0)
-plus a Schroeder-phased multisine over the resonance band. ``triangle-sweep``:
+``multisine``: a slow two-tone sweep of the range (f0 and 3.3 f0, f0 as high as
+the rate limit allows up to a tenth of the resonance, at least 3/duration)
+plus triangular minor loops over about three saturation lengths 1/(beta + gamma)
+of the guess, plus a Schroeder-phased multisine over the resonance band. ``triangle-sweep``:
 triangles from f0 up to a fraction of the resonance whose amplitude falls as
 the frequency rises so the rate limit holds, which puts harmonics through the
 resonance. Both are scaled to stay within ``[umin, umax]`` and ``|du/dt| <=
@@ -93,13 +95,27 @@ def design_excitation(
     n = _check(umin, umax, udot_max, duration, dt)
     t = np.arange(n) * dt
     mid, half = 0.5 * (umin + umax), 0.5 * (umax - umin)
-    f0 = 3.0 / duration
     fr = math.sqrt(guess.a1) / (2 * math.pi)
+    # as many large reversals as the rate limit allows (at least three cycles), a
+    # decade below the resonance: hysteresis is rate independent, each cycle adds
+    # information on alpha, beta, gamma
+    f_rate = 0.6 * udot_max / (2 * math.pi * 1.69 * 0.8 * half)
+    f0 = max(3.0 / duration, min(f_rate, fr / 10.0))
     fmax = 0.45 / dt
     rng = np.random.default_rng(seed)
     if kind == "multisine":
         slow = 0.7 * np.sin(2 * np.pi * f0 * t - 0.5 * np.pi) + 0.3 * np.sin(
             2 * np.pi * 3.3 * f0 * t
+        )
+        # minor loops: reversals over a few saturation lengths 1/(beta + gamma) of the
+        # guess carry most of the information on the loop shape
+        sat = 1.0 / max(guess.beta + guess.gamma, 1e-12)
+        a_minor = min(3.0 * sat, 0.25 * half)
+        f_minor = min(fr / 4.0, 0.3 * udot_max / (4.0 * a_minor), fmax / 4.0)
+        minor = (
+            (a_minor / half)
+            * (2.0 / math.pi)
+            * np.arcsin(np.sin(2 * np.pi * max(f_minor, 7.1 * f0) * t))
         )
         freqs = np.geomspace(0.3 * fr, min(3.0 * fr, fmax), 12)
         freqs = freqs[freqs > 10 * f0]
@@ -110,8 +126,10 @@ def design_excitation(
             fast += np.sin(2 * np.pi * f * t + phase)
         if freqs.size:
             fast /= np.max(np.abs(fast))
-        # 85 % of the range for the sweep, the rest for the band; both rate-limited
-        u = _fit_limits(slow, fast, mid, half, udot_max, dt, share=0.15)
+        # the sweep, minor loops and the band share the range; all rate-limited
+        u = _fit_limits(
+            slow * (1 - a_minor / half) + minor, fast, mid, half, udot_max, dt, share=0.15
+        )
     else:
         # triangle frequency rises geometrically from f0 to fr/3; amplitude capped by the rate
         f_end = max(f0, min(fr / 3.0, fmax / 3.0))

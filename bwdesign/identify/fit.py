@@ -6,13 +6,13 @@ Steps (each is seeded and deterministic):
    grid over the hysteresis shape (beta times the input range, gamma/beta and
    the initial hysteresis state) is solved for gain, alpha, offset and initial
    state by linear least squares (the model is linear in them: ``h`` scales
-   with ``alpha``). A second grid over resonance, damping and an integer input
-   grid over resonance and damping follows, then the hysteresis grid once more.
+   with ``alpha``). A second grid over resonance and damping follows, then
+   the hysteresis grid once more.
 2. **Refine** all coordinates of :mod:`bwdesign.identify.problem` with
    ``scipy.optimize.least_squares`` (trust-region reflective) from the best
    start and from seeded perturbations of it (``multistart``).
 3. **Identifiability.** If the resonance is not determined by the data (its
-   95 % half-width exceeds 50 %, or less than 1e-4 of the input's power lies
+   95 % half-width exceeds 50 %, or less than 1e-5 of the input's power lies
    between a third and three times it, as on a slow sine: a local interval
    alone can look tight on such data while the truth lies elsewhere) it is
    held at the prior: ``init``'s a1; else the free fit's value when that lies
@@ -48,7 +48,7 @@ DETERMINED_REL = 0.5
 _DELAYS = (0, 1, 2, 3)
 #: Least share of the input's power within a third and three times the fitted
 #: resonance for the resonance to count as seen (besides a tight interval).
-MIN_BAND_FRACTION = 1e-4
+MIN_BAND_FRACTION = 1e-5
 #: chi-square(1) quantile at 0.999: the misfit drop a delay must buy.
 _LR_DELAY = 10.83
 
@@ -359,7 +359,7 @@ def identify(
 def _band_fraction(u: np.ndarray, dt: float, f_lo: float, f_hi: float) -> float:
     """Share of the power of the detrended input within ``[f_lo, f_hi]`` Hz."""
     k = np.arange(u.size)
-    x = u - np.polyval(np.polyfit(k, u, 1), k)
+    x = (u - np.polyval(np.polyfit(k, u, 1), k)) * np.hanning(u.size)  # Hann: little leakage
     power = np.abs(np.fft.rfft(x)) ** 2
     f = np.fft.rfftfreq(u.size, dt)
     total = float(power[1:].sum())
