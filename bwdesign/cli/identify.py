@@ -32,6 +32,9 @@ def identify_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--multistart", type=int, default=3, metavar="N", help="refinements (3)")
     p.add_argument("--seed", type=int, default=0, help="seed of the multistart perturbations")
+    p.add_argument(
+        "--max-nfev", type=int, default=200, metavar="N", help="evaluations per refinement (200)"
+    )
     p.add_argument("--name", help="plant name in the stage file (default: the data file's stem)")
     p.add_argument("--out", required=True, metavar="STAGE.toml", help="stage file to write")
     p.add_argument("--report", metavar="DIR", help="write the identification report here")
@@ -44,8 +47,8 @@ def run_identify(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".toml":
         raise UsageError(f"--out must be a .toml file, got {args.out!r}")
-    if args.multistart < 1:
-        raise UsageError(f"--multistart must be >= 1, got {args.multistart}")
+    if args.multistart < 1 or args.max_nfev < 1:
+        raise UsageError("--multistart and --max-nfev must be >= 1")
     data = load_data(args.data, columns=args.columns)
     valid = load_data(args.validate, columns=args.columns) if args.validate else None
     fixed = tuple(f.strip() for f in args.fixed.split(",")) if args.fixed else ()
@@ -61,6 +64,7 @@ def run_identify(args: argparse.Namespace) -> int:
         fixed=fixed,
         multistart=args.multistart,
         seed=args.seed,
+        max_nfev=args.max_nfev,
         name=args.name or Path(args.data).stem,
         progress=say,
     )

@@ -164,10 +164,16 @@ def _hac_lag(r: np.ndarray) -> int:
 
 
 def _covariance(jac: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, int]:
-    """Newey-West sandwich covariance of the free coordinates, and its lag."""
+    """Newey-West sandwich covariance of the free coordinates, and its lag.
+
+    Directions of the Jacobian with a singular value below 1e-8 of the largest
+    are not determined: every coordinate with weight in them gets an infinite
+    variance (and the rest is computed on the determined subspace).
+    """
     n, p = jac.shape
     _, s, vt = np.linalg.svd(jac, full_matrices=False)
-    inv = 1.0 / np.maximum(s, s[0] * 1e-13) ** 2
+    ok = s > s[0] * 1e-8 if s[0] > 0 else np.zeros_like(s, dtype=bool)
+    inv = np.where(ok, 1.0 / np.where(ok, s, 1.0) ** 2, 0.0)
     bread = (vt.T * inv) @ vt
     g = jac * r[:, None]
     lag = _hac_lag(r)
@@ -177,6 +183,11 @@ def _covariance(jac: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, int]:
         gam = g[ell:].T @ g[:-ell]
         meat += w * (gam + gam.T)
     cov = bread @ meat @ bread * (n / max(1, n - p))
+    weight = (vt[~ok] ** 2).sum(axis=0)
+    for j in np.flatnonzero(weight > 1e-6):
+        cov[j, :] = 0.0
+        cov[:, j] = 0.0
+        cov[j, j] = math.inf
     return cov, lag
 
 
@@ -368,8 +379,12 @@ def build_result(
     idx = np.flatnonzero(free)
     cov[np.ix_(idx, idx)] = cov_free
     tn = _natural_jacobian(theta, p)
-    cov6 = tn @ cov @ tn.T
+    bad = ~np.isfinite(np.diag(cov))
+    cov_ok = np.where(np.isfinite(cov), cov, 0.0)
+    cov6 = tn @ cov_ok @ tn.T
     var = np.clip(np.diag(cov6), 0.0, None)
+    inf6 = (np.abs(tn[:, bad]) > 0).any(axis=1)
+    var = np.where(inf6 | ~np.isfinite(var), math.inf, var)
     se = {n: float(math.sqrt(v)) for n, v in zip(NAMES, var, strict=True)}
     if resonance_held is not None:
         for n in ("a1", "a2", "a3"):
@@ -393,7 +408,7 @@ def build_result(
     tau = p.a2 / p.a1
     wn = math.sqrt(p.a1)
     zeta = 0.5 * tau * wn
-    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    sd = np.sqrt(np.clip(np.where(np.isfinite(np.diag(cov)), np.diag(cov), np.inf), 0.0, None))
     var_logzeta = cov[ITAU, ITAU] + cov[IW, IW] + 2 * cov[ITAU, IW]
     held = resonance_held is not None
     derived = {
