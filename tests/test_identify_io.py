@@ -291,3 +291,23 @@ def test_simulated_record_with_amplifier_lag_differs():
     a = simulate_record(p, u, 2e-4, noise=0.0)
     b = simulate_record(p, u, 2e-4, noise=0.0, amplifier_lag=1e-3)
     assert 0 < np.max(np.abs(a.y - b.y)) < 0.5
+
+
+def test_identify_report(records, capsys, tmp_path):
+    d, _ = records
+    out, rep = tmp_path / "stage.toml", tmp_path / "rep"
+    args = ["identify", "--data", str(d / "train.csv"), "--out", str(out), "--quiet"]
+    assert main([*args, "--multistart", "1", "--report", str(rep)]) == 0
+    md = (rep / "report.md").read_text()
+    for text in ("95 % interval", "Correlation matrix", "hysteresis loop", "autocorrelation"):
+        assert text in md
+    html = (rep / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 3
+    assert json.loads((rep / "identification.json").read_text())["converged"] is True
+    # rerun replaces its own report; a foreign directory is refused
+    assert main([*args, "--multistart", "1", "--report", str(rep)]) == 0
+    foreign = tmp_path / "notes"
+    foreign.mkdir()
+    (foreign / "mine.txt").write_text("keep")
+    assert main([*args, "--multistart", "1", "--report", str(foreign)]) == 2
+    assert (foreign / "mine.txt").read_text() == "keep"
