@@ -299,7 +299,7 @@ def test_identify_report(records, capsys, tmp_path):
     args = ["identify", "--data", str(d / "train.csv"), "--out", str(out), "--quiet"]
     assert main([*args, "--multistart", "1", "--report", str(rep)]) == 0
     md = (rep / "report.md").read_text()
-    for text in ("95 % interval", "Correlation matrix", "hysteresis loop", "autocorrelation"):
+    for text in ("95 % interval", "Correlation matrix", "Hysteresis loop", "autocorrelation"):
         assert text in md
     html = (rep / "report.html").read_text()
     assert html.count("data:image/png;base64,") == 3
