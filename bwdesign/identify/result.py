@@ -8,10 +8,12 @@ the textbook ``s^2 (J^T J)^-1`` for white residuals and widens the intervals
 when the residuals are correlated (unmodelled dynamics, coloured sensor
 noise). Its lag is the first at which the residual autocorrelation drops
 below ``2/sqrt(N)`` (at least the Newey-West rule ``4 (N/100)^(2/9)``, at most
-``min(N/20, 400)``). The six parameters' covariance follows by the delta
-method; 95 % intervals are ``value ± 1.96 sd``. A parameter is *determined*
-when that half-width is below 50 % of its value; otherwise its interval is
-reported (possibly infinite) and a diagnostic says why.
+``min(N/20, 400)``). Each variance is the larger of that estimate and the
+white-noise one (Newey-West is biased low in finite samples). The six
+parameters' covariance follows by the delta method; 95 % intervals are
+``value ± 1.96 sd``. A parameter is *determined* when that half-width is
+below 50 % of its value; otherwise its interval is reported (possibly
+infinite) and a diagnostic says why.
 """
 
 from __future__ import annotations
@@ -183,6 +185,15 @@ def _covariance(jac: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, int]:
         gam = g[ell:].T @ g[:-ell]
         meat += w * (gam + gam.T)
     cov = bread @ meat @ bread * (n / max(1, n - p))
+    # never narrower than the white-noise s^2 (J^T J)^-1 (Newey-West is biased low
+    # in finite samples): per coordinate the larger variance, Newey-West correlation
+    s2 = float(r @ r) / max(1, n - p)
+    white = np.diag(bread) * s2
+    d_hac = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    d_max = np.sqrt(np.maximum(np.diag(cov), white))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.where(np.outer(d_hac, d_hac) > 0, cov / np.outer(d_hac, d_hac), 0.0)
+    cov = corr * np.outer(d_max, d_max)
     weight = (vt[~ok] ** 2).sum(axis=0)
     for j in np.flatnonzero(weight > 1e-6):
         cov[j, :] = 0.0
@@ -487,7 +498,8 @@ def build_result(
         reason=reason,
         covariance_method=(
             f"Newey-West sandwich (Bartlett weights, lag {lag} samples) on the Jacobian at "
-            "the optimum; delta method to a1..gamma"
+            "the optimum, each variance at least the white-noise s^2 (J^T J)^-1; delta "
+            "method to a1..gamma"
         ),
         nfev=nfev,
         n_starts=n_starts,
