@@ -83,6 +83,7 @@ def test_quick_round_trip_without_init():
     assert res.residual_rms == pytest.approx(0.01, rel=0.1)
     assert res.delay_samples == 0
     assert all(res.determined.values())
+    assert res.diagnostics == ()
     assert res.params.bounded_class().bounded
     doc = res.to_dict()
     assert set(doc["params"]) == set(NAMES) and set(doc["ci95"]) == set(NAMES)
