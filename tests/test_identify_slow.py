@@ -144,3 +144,36 @@ def test_unmodelled_amplifier_lag_bias_is_reported():
     assert res.fit_percent["validation"] > 99.0
     assert max(abs(e) for e in errs.values()) > 1.0
     assert any("residuals are not white" in d for d in res.diagnostics)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "stage,fs",
+    [("paper_experiment", 5000.0), ("configs/stack_actuator_800hz.toml", 200.0)],
+    ids=["experiment_5kHz", "stack_800Hz_at_200Hz"],
+)
+def test_slow_sine_bench_record_resonance_unseen(stage, fs):
+    """1 Hz sine, 7 um offset, starting mid-cycle: gain and loop fitted, resonance flagged."""
+    from bwdesign import load_plant, simulate_zoh
+
+    plant = load_plant(stage)
+    dt = 1.0 / fs
+    n_pre, n = int(1.3 * fs), int(5 * fs)
+    t = np.arange(n_pre + n) * dt
+    mid, amp = (60.0, 50.0) if plant.name == "paper_experiment" else (50.0, 50.0)
+    u = mid + amp * np.sin(2 * np.pi * t + 0.4)
+    x = simulate_zoh(plant, u[:n_pre], dt, np.zeros(3), u_prev=u[0])
+    rec = simulate_record(plant, u[n_pre:], dt, noise=0.01, offset=7.0, x0=tuple(x[-1]), seed=3)
+    res = identify(rec)
+    print(f"\n{stage} at {fs:g} Hz: " + "; ".join(res.diagnostics))
+    assert res.converged, res.reason
+    assert [n_ for n_ in NAMES if not res.determined[n_]] == ["a1", "a2", "a3"]
+    k = res.derived["static_gain"]
+    # Known limit: at 200 Hz the stack's lightly damped 800 Hz mode (zeta 0.05) aliases
+    # into the record; with it held at the default the gain is 0.52 % low while its
+    # interval (conditional on the held resonance) is +-0.07 %: within 1 %, not covered.
+    assert abs(k["value"] / plant.static_gain - 1) < 0.01
+    for n_ in ("alpha", "beta", "gamma"):
+        lo, hi = res.ci95[n_]
+        assert lo <= getattr(plant, n_) <= hi, n_
+    assert abs(res.offset - 7.0) < 0.05

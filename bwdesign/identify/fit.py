@@ -20,7 +20,11 @@ Steps (each is seeded and deterministic):
    curvature of the response placed it); else the stated default
    ``wn = max(pi/dt, 2/tau)``, at or above the Nyquist frequency and at least
    critically damped for the fitted lag. The rest is refitted and a1, a2, a3
-   are reported as not determined.
+   are reported as not determined. The fit is repeated with the resonance at
+   0.5 to 32 times the held value; every one that fits the record as well
+   (misfit within the chi-square 95 % quantile of noise variances) widens the
+   other intervals to cover its estimates (a local interval alone would
+   pretend the resonance is known).
 4. **Intervals** from the Jacobian at the optimum (see
    :mod:`bwdesign.identify.result`).
 """
@@ -49,6 +53,10 @@ _DELAYS = (0, 1, 2, 3)
 #: Least share of the input's power within a third and three times the fitted
 #: resonance for the resonance to count as seen (besides a tight interval).
 MIN_BAND_FRACTION = 1e-5
+#: Resonances (times the held one) refitted to see which fit the record as well.
+_PROFILE_FACTORS = (0.5, 2.0, 4.0, 8.0, 16.0, 32.0)
+#: chi-square(1) 95 % quantile: the misfit increase (in noise variances) that still fits.
+_CHI2_95 = 3.84
 #: chi-square(1) quantile at 0.999: the misfit drop a delay must buy.
 _LR_DELAY = 10.83
 
@@ -312,6 +320,7 @@ def identify(
         say(f"  input delay {d} sample(s): cost {2 * sol_d.cost:.6g}")
         delay, theta, sol, prob = d, th_d, sol_d, trial
     resonance_held = None
+    alternatives: list[np.ndarray] = []
     if free[IW]:
         rel = _rel_halfwidth(prob, theta, free, IW)
         f_r = math.exp(theta[IW]) / (2 * math.pi)
@@ -339,15 +348,32 @@ def identify(
                 theta[IW] = math.log(wn_hold)
                 theta, sol = _refine(prob, theta, free, max_nfev)
                 nfev += sol.nfev
+            # profile: other resonances that fit the record as well widen the intervals
+            held = free.copy()
+            held[IW] = False
+            s2 = 2.0 * sol.cost / max(1, data.n - int(held.sum()))
+            for factor in _PROFILE_FACTORS:
+                th_k = theta.copy()
+                th_k[IW] += math.log(factor)
+                th_k, sol_k = _refine(prob, th_k, held, max_nfev)
+                nfev += sol_k.nfev
+                if 2.0 * (sol_k.cost - sol.cost) <= _CHI2_95 * s2:
+                    alternatives.append(th_k)
+            say(f"  {len(alternatives)} other resonance(s) fit as well: intervals widened")
+    # intervals with the resonance free even when it is held: they must not pretend
+    # that a resonance the record cannot see is known
+    cov_free = free.copy()
+    cov_free[IW] = cov_free[IW] or resonance_held is not None
     return build_result(
         prob,
         theta,
-        free,
+        cov_free,
         sol,
         data=data,
         validation=validation,
         delay=delay,
         resonance_held=resonance_held,
+        alternatives=alternatives,
         name=name,
         nfev=nfev,
         n_starts=multistart,

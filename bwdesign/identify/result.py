@@ -378,6 +378,7 @@ def build_result(
     validation: Any,
     delay: int,
     resonance_held: tuple[str, float, float, float] | None,
+    alternatives: list[np.ndarray],
     name: str,
     nfev: int,
     n_starts: int,
@@ -415,6 +416,14 @@ def build_result(
         if not math.isfinite(se[n]) or var[i] == 0:
             corr[i, :] = np.nan
             corr[:, i] = np.nan
+    widened = []
+    alt = [params_from_theta(th, prob.sign) for th in alternatives]
+    for n in NAMES:
+        spread = max((abs(getattr(q, n) - values[n]) for q in alt), default=0.0)
+        if math.isfinite(se[n]) and spread > Z95 * se[n]:
+            se[n] = spread / Z95
+            rel[n] = Z95 * se[n] / abs(values[n]) if values[n] else math.inf
+            widened.append(n)
     ci = {n: (values[n] - Z95 * se[n], values[n] + Z95 * se[n]) for n in NAMES}
     determined = {n: bool(rel[n] < _DETERMINED_REL) for n in NAMES}
 
@@ -437,6 +446,9 @@ def build_result(
             "std_err": math.inf if held else zeta * math.sqrt(max(var_logzeta, 0.0)),
         },
     }
+    for key, get in (("static_gain", lambda q: q.static_gain), ("lag", lambda q: q.a2 / q.a1)):
+        spread = max((abs(get(q) - derived[key]["value"]) for q in alt), default=0.0)
+        derived[key]["std_err"] = max(derived[key]["std_err"], spread / Z95)
     y_model = prob.predict(theta)
     res_um = y_model - prob.y
     fit_train = fit_percent(prob.y, y_model)
@@ -459,6 +471,16 @@ def build_result(
                 "val_y_model": v_model,
             }
         )
+    if alternatives:
+        f_alt = sorted(math.sqrt(q.a1) / (2 * math.pi) for q in alt)
+        extra = f" (widened: {', '.join(widened)})" if widened else ""
+        widened_note = (
+            f"With the resonance at {f_alt[0]:.4g} to {f_alt[-1]:.4g} Hz the record is fitted "
+            f"as well ({len(alt)} refits within the chi-square 95 % misfit): the intervals "
+            f"and the static gain's and lag's standard errors cover those estimates too{extra}."
+        )
+    else:
+        widened_note = ""
     notes = _diagnose(
         p=p,
         u=data.u,
@@ -472,6 +494,8 @@ def build_result(
         r_acf1=whiteness,
         fit_train=fit_train,
     )
+    if widened_note:
+        notes.append(widened_note)
     finite = all(math.isfinite(v) for v in values.values()) and math.isfinite(sol.cost)
     converged = bool(sol.status > 0 and finite)
     reason = str(sol.message) if finite else "the optimum is not finite"
