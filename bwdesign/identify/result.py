@@ -263,9 +263,14 @@ def _diagnose(
             f"determine: static gain a3/a1 = {k['value']:.6g} ± {Z95 * k['std_err']:.2g} µm/V "
             f"and the effective lag a2/a1 = {tau['value']:.4g} ± {Z95 * tau['std_err']:.2g} s "
             f"(given the held resonance; it also absorbs the sampled response of the real "
-            f"one). Before "
-            f"certifying, identify the resonance with `bwdesign excite` at a sample rate "
-            f"several times above it, or give the stage's a1 with --init."
+            f"one). "
+            + (
+                "Certificates for this stage file rely on init's a1 and a2: check them "
+                "with an identification record that contains the resonance."
+                if src == "init"
+                else "Before certifying, identify the resonance with `bwdesign excite` at "
+                "a sample rate several times above it, or give the stage's a1 with --init."
+            )
         )
     n_rev, travel = _monotone_runs(u)
     sat = 1.0 / (p.beta + p.gamma)
@@ -327,6 +332,10 @@ def _diagnose(
             "corrected but cannot cover a wrong model."
         )
     return notes
+
+
+def _hz_range(f: list[float]) -> str:
+    return f"{f[0]:.4g} Hz" if len(f) == 1 else f"{f[0]:.4g} to {f[-1]:.4g} Hz"
 
 
 def _pct(rel: float) -> str:
@@ -475,8 +484,8 @@ def build_result(
         f_alt = sorted(math.sqrt(q.a1) / (2 * math.pi) for q in alt)
         extra = f" (widened: {', '.join(widened)})" if widened else ""
         widened_note = (
-            f"With the resonance at {f_alt[0]:.4g} to {f_alt[-1]:.4g} Hz the record is fitted "
-            f"as well ({len(alt)} refits within the chi-square 95 % misfit): the intervals "
+            f"With the resonance at {_hz_range(f_alt)} the record is fitted as well "
+            f"({len(alt)} refit(s) within the chi-square 95 % misfit): the intervals "
             f"and the static gain's and lag's standard errors cover those estimates too{extra}."
         )
     else:
