@@ -223,6 +223,7 @@ def _multistart(
 ):
     rng = np.random.default_rng(seed)
     best = None
+    total = 0
     for i in range(max(1, multistart)):
         th0 = start.copy()
         if i > 0:
@@ -233,10 +234,11 @@ def _multistart(
             th0 = th0 + np.where(free, scale * rng.standard_normal(10), 0.0)
             th0[IQ] = float(np.clip(th0[IQ], -Q_MAX + 0.1, Q_MAX - 0.1))
         th, sol = _refine(prob, th0, free, max_nfev)
+        total += sol.nfev
         say(f"  start {i + 1}/{multistart}: cost {2 * sol.cost:.6g} after {sol.nfev} evaluations")
         if best is None or sol.cost < best[1].cost:
             best = (th, sol)
-    return best
+    return best[0], best[1], total
 
 
 def identify(
@@ -305,10 +307,9 @@ def identify(
     start, sign, cost0 = _start(data, prior, free)
     say(f"  start cost {cost0:.6g}")
     prob = Problem(data.u, data.y, data.dt, sign)
-    theta, sol = _multistart(
+    theta, sol, nfev = _multistart(
         prob, start, free, multistart=multistart, seed=seed, max_nfev=max_nfev, say=say
     )
-    nfev = sol.nfev
     delay = 0
     for d in _DELAYS[1:]:
         # a delay must earn its place: a likelihood-ratio gain above chi2(1, 0.999)
