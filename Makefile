@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report reports paper lint bench dist
+.PHONY: install test report reports paper lint bench dist identify
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -23,6 +23,16 @@ test: $(STAMP)
 # the main job: the certified-gains report for the default stage
 report: $(STAMP)
 	$(BIN)/bwdesign report --config $(CONFIG) --out $(OUT)
+
+# from bench data to a stage file and its certified gains: DATA (t,u,y CSV or NPZ),
+# optional VALID; writes $(IDENT)/stage.toml, $(IDENT)/identification/ and $(IDENT)/certified/
+DATA  ?= examples/identification/train.csv
+VALID ?= examples/identification/valid.csv
+IDENT ?= reports/identified
+identify: $(STAMP)
+	$(BIN)/bwdesign identify --data $(DATA) $(if $(VALID),--validate $(VALID)) \
+	  --out $(IDENT)/stage.toml --report $(IDENT)/identification
+	$(BIN)/bwdesign report --config $(IDENT)/stage.toml --out $(IDENT)/certified
 
 # reports for every bundled stage configuration
 reports: $(STAMP)
@@ -44,6 +54,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_certify.py
 	$(BIN)/python benchmarks/bench_codegen.py
 	$(BIN)/python benchmarks/bench_sweep.py
+	$(BIN)/python benchmarks/bench_identify.py
 
 # the sdist and the wheel (the wheel built from the sdist) into dist/, checked as an index would
 dist: $(STAMP)

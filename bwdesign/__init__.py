@@ -25,12 +25,14 @@ from .errors import (
     SolverError,
     UnboundedModelError,
 )
+from .identify import IdentificationResult, identify
 from .model.config import ControllerSettings, StageConfig, load_config, load_plant
 from .model.envelope import Envelope, derive_envelope, given_envelope
 from .model.params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
 from .model.plant import hysteresis_increment, simulate_zoh, zoh_step
 from .model.references import Sine, Step, Triangle
 from .model.stage_presets import stage_presets
+from .model.uncertainty import UncertaintyBox
 from .observers.sampled import ExtendedStateObserver, HysteresisObserver
 from .observers.ukf import UnscentedObserver
 from .sim.closed_loop import simulate
@@ -101,4 +103,7 @@ __all__ = [
     "ErrorDynamics",
     "HysteresisBode",
     "OutputError",
+    "identify",
+    "IdentificationResult",
+    "UncertaintyBox",
 ]

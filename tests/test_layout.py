@@ -21,6 +21,7 @@ LAYERS = (
     ("errors", "_version", "extras", "validate"),
     ("output", "plotting"),
     ("model",),
+    ("identify",),
     ("observers",),
     ("control",),
     ("certify",),

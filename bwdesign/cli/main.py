@@ -143,6 +143,18 @@ COMMANDS: list[Command] = [
         _lazy("cli.init", "presets_args"),
         _lazy("cli.init", "run_presets"),
     ),
+    (
+        "identify",
+        "fit the stage model to a measured (t, u, y) record; write a stage TOML with intervals",
+        _lazy("cli.identify", "identify_args"),
+        _lazy("cli.identify", "run_identify"),
+    ),
+    (
+        "excite",
+        "design an identification input (within amplifier range and rate limit) as CSV",
+        _lazy("cli.excite", "excite_args"),
+        _lazy("cli.excite", "run_excite"),
+    ),
 ]
 
 

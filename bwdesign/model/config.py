@@ -11,6 +11,7 @@ One file per stage; only ``[plant]`` is required::
     [envelope]     udot_max (input unit/s), or from_reference = true with optional margin >= 1
     [reference]    kind = "sine" | "triangle" | "step", amplitude, offset, frequency, ...
     [synthesis]    decay (1/s) and pole_radius (rad/s) asked of the gain synthesis in reports
+    [uncertainty]  per-parameter half-widths (bwdesign.model.uncertainty)
 
 Unknown sections and keys are errors that name the allowed ones. Numbers are in
 the plant's units: length_unit for x1, x3 and the reference, input_unit for u
@@ -37,6 +38,7 @@ from .plant import check_sample_time
 from .references import Reference, reference_from_dict
 from .requirements import parse_requirements
 from .stage_presets import resolve_config, stage_presets
+from .uncertainty import UncertaintyBox
 
 __all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant"]
 
@@ -49,6 +51,7 @@ _SECTIONS = {
     "reference": None,  # checked per kind
     "synthesis": {"decay", "pole_radius"},
     "requirements": None,  # checked by model.requirements
+    "uncertainty": None,  # checked by UncertaintyBox.from_dict
 }
 
 
@@ -89,6 +92,8 @@ class StageConfig:
         ``decay`` (1/s) and ``pole_radius`` (rad/s) for the report's gain synthesis.
     requirements : dict or None
         The ``[requirements]`` a user's CI checks (:mod:`bwdesign.model.requirements`).
+    uncertainty : UncertaintyBox or None
+        The ``[uncertainty]`` section (None when absent).
     source : str
         Path of the file.
     sha256 : str
@@ -103,6 +108,7 @@ class StageConfig:
     envelope_spec: dict[str, Any] | None = None
     synthesis: dict[str, float] | None = None
     requirements: dict[str, Any] | None = None
+    uncertainty: UncertaintyBox | None = None
     source: str = ""
     sha256: str = ""
 
@@ -246,6 +252,10 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
             for k in syn
         }
 
+    uncertainty = None
+    if "uncertainty" in data:
+        uncertainty = UncertaintyBox.from_dict(data["uncertainty"])
+
     return StageConfig(
         plant=plant,
         gains=gains,
@@ -257,6 +267,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         requirements=(parse_requirements(data["requirements"]) or None)
         if "requirements" in data
         else None,
+        uncertainty=uncertainty,
         source=source,
         sha256=sha256,
     )

@@ -1,0 +1,91 @@
+"""``bwdesign identify``: a measured record in, a stage TOML (and a report) out.
+
+Exit codes: 0 fitted; 1 the fit did not converge (the reason on stderr, nothing
+written); 2 bad input with one ``error:`` line (nothing written).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from ..identify import identify, load_data
+from ..identify.files import write_file
+from ..identify.stagefile import stage_toml
+from ..output.jsonenc import dump_json
+from .args import EXIT_NO, EXIT_OK, UsageError
+
+__all__ = ["identify_args", "run_identify"]
+
+
+def identify_args(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``bwdesign identify``."""
+    p.add_argument("--data", required=True, metavar="TRAIN.csv", help="training record (.csv/.npz)")
+    p.add_argument("--validate", metavar="VALID.csv", help="held-out record for the fit percent")
+    p.add_argument(
+        "--columns", metavar="T,U,Y", help="names of the time, input, output columns (t,u,y)"
+    )
+    p.add_argument("--init", metavar="PRESET_OR_TOML", help="start (and prior) parameters")
+    p.add_argument(
+        "--fixed", metavar="NAMES", help="comma-separated parameters held at --init (e.g. a1,a2)"
+    )
+    p.add_argument("--multistart", type=int, default=3, metavar="N", help="refinements (3)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the multistart perturbations")
+    p.add_argument(
+        "--max-nfev", type=int, default=200, metavar="N", help="evaluations per refinement (200)"
+    )
+    p.add_argument("--name", help="plant name in the stage file (default: the data file's stem)")
+    p.add_argument("--out", required=True, metavar="STAGE.toml", help="stage file to write")
+    p.add_argument("--report", metavar="DIR", help="write the identification report here")
+    p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+
+
+def run_identify(args: argparse.Namespace) -> int:
+    """Run ``bwdesign identify``."""
+    out = Path(args.out)
+    if out.suffix.lower() != ".toml":
+        raise UsageError(f"--out must be a .toml file, got {args.out!r}")
+    if args.multistart < 1 or args.max_nfev < 1:
+        raise UsageError("--multistart and --max-nfev must be >= 1")
+    data = load_data(args.data, columns=args.columns)
+    valid = load_data(args.validate, columns=args.columns) if args.validate else None
+    fixed = tuple(f.strip() for f in args.fixed.split(",")) if args.fixed else ()
+
+    def say(msg: str) -> None:
+        if not args.quiet:
+            print(msg, file=sys.stderr, flush=True)
+
+    result = identify(
+        data,
+        validation=valid,
+        init=args.init,
+        fixed=fixed,
+        multistart=args.multistart,
+        seed=args.seed,
+        max_nfev=args.max_nfev,
+        name=args.name or Path(args.data).stem,
+        progress=say,
+    )
+    doc = result.to_dict()
+    if not result.converged:
+        if args.json:
+            print(dump_json(doc))
+        print(f"identify: the fit did not converge: {result.reason}", file=sys.stderr)
+        return EXIT_NO
+    write_file(out, stage_toml(result, data))
+    doc["out"] = str(out)
+    if args.report:
+        from ..report.identification import write_identification_report
+
+        doc["report"] = str(write_identification_report(result, args.report, stage_file=out))
+    if args.json:
+        print(dump_json(doc))
+    else:
+        fp = result.fit_percent
+        val = f", validation {fp['validation']:.2f} %" if fp["validation"] is not None else ""
+        print(f"{out}: fit {fp['train']:.2f} %{val}; residual RMS {result.residual_rms:.3g} um")
+        for note in result.diagnostics:
+            print(f"note: {note}")
+    return EXIT_OK

@@ -1,0 +1,194 @@
+"""The output-error problem in scaled, identifiable coordinates.
+
+Fit vector ``theta`` (all O(1)):
+
+=====  ==============  =====================================================
+index  name            meaning
+=====  ==============  =====================================================
+0      log_gain        ``log |K|``, ``K = a3/a1`` the static gain (µm/V)
+1      log_lag         ``log tau``, ``tau = a2/a1`` (s): the low-frequency lag
+2      log_wn          ``log wn``, ``wn = sqrt(a1)`` (rad/s): the resonance
+3      log_alpha       ``log alpha``
+4      log_beta        ``log beta``
+5      shape           ``q``, ``gamma = beta tanh(q)``
+6      offset          sensor offset, ``y_mean + y_scale * theta``
+7      h0              initial hysteresis state, ``theta * alpha/(beta + gamma)``
+8      x1_0            initial displacement minus its equilibrium, in ``y_scale``
+9      x2_0            initial velocity in ``y_scale * wn``
+=====  ==============  =====================================================
+
+``alpha > 0``, ``beta > 0`` and ``beta - gamma = beta (1 - tanh q) > 0``,
+``beta + gamma > 0``: every ``theta`` is in the bounded class (an open set; its
+boundary ``beta = gamma`` is approached only as ``q -> inf``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.params import BoucWenParams
+from .simulate import hysteresis_path, linear_matrices, linear_response
+
+__all__ = ["FIT_NAMES", "Problem", "params_from_theta", "theta_from_params"]
+
+FIT_NAMES = (
+    "log_gain",
+    "log_lag",
+    "log_wn",
+    "log_alpha",
+    "log_beta",
+    "shape",
+    "offset",
+    "h0",
+    "x1_0",
+    "x2_0",
+)
+IK, ITAU, IW, IA, IB, IQ, IOFF, IZ, IE1, IE2 = range(10)
+#: Largest |q|: tanh(8) = 1 - 2.3e-7 keeps beta - gamma > 0 in floating point.
+Q_MAX = 8.0
+
+
+def params_from_theta(theta: np.ndarray, sign: float, name: str = "") -> BoucWenParams:
+    """The Bouc-Wen parameters of a fit vector."""
+    k = sign * math.exp(theta[IK])
+    wn2 = math.exp(2.0 * theta[IW])
+    beta = math.exp(theta[IB])
+    return BoucWenParams(
+        a1=wn2,
+        a2=math.exp(theta[ITAU]) * wn2,
+        a3=k * wn2,
+        alpha=math.exp(theta[IA]),
+        beta=beta,
+        gamma=beta * math.tanh(theta[IQ]),
+        name=name,
+    )
+
+
+def theta_from_params(p: BoucWenParams) -> tuple[np.ndarray, float]:
+    """The first six fit coordinates of a bounded parameter set, and the gain's sign."""
+    beta = p.beta
+    ratio = min(max(p.gamma / beta, -math.tanh(Q_MAX)), math.tanh(Q_MAX)) if beta > 0 else 0.0
+    th = np.zeros(10)
+    th[IK] = math.log(abs(p.static_gain))
+    th[ITAU] = math.log(max(p.a2, 1e-12 * math.sqrt(p.a1)) / p.a1)
+    th[IW] = 0.5 * math.log(p.a1)
+    th[IA] = math.log(p.alpha)
+    th[IB] = math.log(beta) if beta > 0 else 0.0
+    th[IQ] = math.atanh(ratio)
+    return th, math.copysign(1.0, p.a3)
+
+
+class Problem:
+    """Residuals and Jacobian of one record for a fixed input delay.
+
+    Parameters
+    ----------
+    u : ndarray
+        Held input (V), already delayed.
+    y : ndarray
+        Measured output (µm).
+    dt : float
+        Sample time (s).
+    sign : float
+        Sign of the static gain.
+    """
+
+    def __init__(self, u: np.ndarray, y: np.ndarray, dt: float, sign: float):
+        self.u = np.ascontiguousarray(u, dtype=float)
+        self.y = np.ascontiguousarray(y, dtype=float)
+        self.dt = float(dt)
+        self.sign = float(sign)
+        self.y_mean = float(np.mean(y))
+        self.y_scale = float(np.std(y)) or 1.0
+        self._cache: dict[tuple[float, float, float], np.ndarray] = {}
+        self.n_loops = 0
+
+    # -- model --------------------------------------------------------------
+    def unit_hysteresis(self, theta: np.ndarray) -> np.ndarray:
+        """Hysteresis path for ``alpha = 1`` (h scales with alpha at fixed ``h0/alpha``)."""
+        key = (float(theta[IB]), float(theta[IQ]), float(theta[IZ]))
+        h = self._cache.get(key)
+        if h is None:
+            beta = math.exp(key[0])
+            gamma = beta * math.tanh(key[1])
+            h = hysteresis_path(self.u, key[2] / (beta + gamma), 1.0, beta, gamma)
+            self.n_loops += 1
+            if len(self._cache) >= 16:
+                self._cache.pop(next(iter(self._cache)))
+            self._cache[key] = h
+        return h
+
+    def predict(self, theta: np.ndarray) -> np.ndarray:
+        """Model output at the measurement instants (µm)."""
+        k = self.sign * math.exp(theta[IK])
+        wn = math.exp(theta[IW])
+        phi, b = linear_matrices(wn * wn, math.exp(theta[ITAU]) * wn * wn, self.dt)
+        w = k * self.u - math.exp(theta[IA]) * self.unit_hysteresis(theta)
+        x0 = np.array([w[0] + self.y_scale * theta[IE1], self.y_scale * wn * theta[IE2]])
+        return linear_response(phi, b, w, x0) + (self.y_mean + self.y_scale * theta[IOFF])
+
+    def residual(self, theta: np.ndarray) -> np.ndarray:
+        """Scaled residual ``(model - measured) / y_scale``."""
+        return (self.predict(theta) - self.y) / self.y_scale
+
+    def jacobian(self, theta: np.ndarray, free: np.ndarray, *, central: bool = False) -> np.ndarray:
+        """Finite-difference Jacobian of :meth:`residual` in the ``free`` coordinates.
+
+        Only steps in beta, q and h0 rerun the hysteresis loop; the others reuse it.
+        """
+        step = 1e-6 if not central else 1e-5
+        r0 = None if central else self.residual(theta)
+        cols = []
+        for i in np.flatnonzero(free):
+            tp = theta.copy()
+            tp[i] += step
+            if central:
+                tm = theta.copy()
+                tm[i] -= step
+                cols.append((self.residual(tp) - self.residual(tm)) / (2 * step))
+            else:
+                cols.append((self.residual(tp) - r0) / step)
+        return np.column_stack(cols)
+
+    # -- linear sub-problem (variable projection, for start values) ----------
+    def linear_basis(self, theta: np.ndarray, h_unit: np.ndarray) -> np.ndarray:
+        """Columns whose coefficients are K, alpha, offset, x1_0 and x2_0 deviations."""
+        wn = math.exp(theta[IW])
+        phi, b = linear_matrices(wn * wn, math.exp(theta[ITAU]) * wn * wn, self.dt)
+        zero = np.zeros_like(self.u)
+        return np.column_stack(
+            [
+                self.sign * linear_response(phi, b, self.u, np.array([self.u[0], 0.0])),
+                -linear_response(phi, b, h_unit, np.array([h_unit[0], 0.0])),
+                np.ones_like(self.u),
+                linear_response(phi, b, zero, np.array([1.0, 0.0])),
+                linear_response(phi, b, zero, np.array([0.0, wn])),
+            ]
+        )
+
+    def project(
+        self, theta: np.ndarray, h_unit: np.ndarray | None = None
+    ) -> tuple[float, np.ndarray]:
+        """Best linear coefficients for the nonlinear part of ``theta``.
+
+        Returns the sum of squared scaled residuals and ``theta`` with gain,
+        alpha, offset and initial state filled in (``inf`` when the best alpha
+        or gain is not positive).
+        """
+        if h_unit is None:
+            h_unit = self.unit_hysteresis(theta)
+        basis = self.linear_basis(theta, h_unit)
+        coef, *_ = np.linalg.lstsq(basis, self.y, rcond=None)
+        th = theta.copy()
+        if coef[0] <= 0 or coef[1] <= 0:
+            return math.inf, th
+        r = basis @ coef - self.y
+        th[IK] = math.log(coef[0])
+        th[IA] = math.log(coef[1])
+        th[IOFF] = (coef[2] - self.y_mean) / self.y_scale
+        # basis columns 3, 4 are responses to unit x1 and x2/wn deviations
+        th[IE1] = coef[3] / self.y_scale
+        th[IE2] = coef[4] / self.y_scale
+        return float(r @ r) / self.y_scale**2, th

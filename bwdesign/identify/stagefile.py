@@ -1,0 +1,82 @@
+"""The stage TOML an identification writes: plant, sampling, reference, envelope, uncertainty."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._version import __version__
+from .data import IdentificationData
+from .files import SIGNATURE
+from .result import IdentificationResult
+
+__all__ = ["stage_toml"]
+
+
+def _comment(text: str, width: int = 96) -> list[str]:
+    words, lines, cur = text.split(), [], "#"
+    for w in words:
+        if len(cur) + 1 + len(w) > width:
+            lines.append(cur)
+            cur = "#  "
+        cur += " " + w
+    lines.append(cur)
+    return lines
+
+
+def stage_toml(result: IdentificationResult, data: IdentificationData) -> str:
+    """A stage file every bwdesign command accepts, with the intervals in [uncertainty].
+
+    ``[reference]`` is a sine over the displacement range of the record at its
+    dominant input frequency and ``[envelope]`` is derived from it (10 %
+    margin): placeholders for the operating trajectory, which the user should
+    replace with their own before certifying.
+    """
+    fp = result.fit_percent
+    val = f"{fp['validation']:.3f} %" if fp["validation"] is not None else "no validation record"
+    head = [
+        f"# {SIGNATURE} {__version__} (identify) from {data.source or 'a record'}:",
+        f"# {data.n} samples at dt = {data.dt:.9g} s. Fit: train {fp['train']:.3f} %, "
+        f"validation {val};",
+        f"# residual RMS {result.residual_rms:.4g} um; sensor offset {result.offset:.6g} um; "
+        f"input delay {result.delay_samples} sample(s).",
+        f"# converged: {result.converged} ({result.reason})",
+        "# Not determined by the record: "
+        + (", ".join(n for n, ok in result.determined.items() if not ok) or "none"),
+    ]
+    for note in result.diagnostics:
+        head += _comment("- " + note)
+    y = data.y - result.offset
+    amp = 0.5 * float(np.ptp(y))
+    centre = float(np.min(y)) + amp
+    u = data.u - np.mean(data.u)
+    spec = np.abs(np.fft.rfft(u * np.hanning(u.size)))
+    freqs = np.fft.rfftfreq(u.size, data.dt)
+    f_dom = float(freqs[1 + int(np.argmax(spec[1:]))])
+    body = [
+        "",
+        result.params.to_toml().rstrip("\n"),
+        "",
+        "[sampling]",
+        f"dt = {data.dt!r}",
+        "",
+        "# Placeholder operating trajectory (the record's range at its dominant input",
+        "# frequency): replace it with the trajectory the stage will track.",
+        "[reference]",
+        'kind = "sine"',
+        f"amplitude = {amp!r}",
+        f"offset = {centre!r}",
+        f"frequency = {f_dom!r}",
+        "",
+        "[envelope]",
+        "from_reference = true",
+        "margin = 1.1",
+        "",
+        "# Placeholder eq. (12) constants (the paper's Section 5 values): tune them.",
+        "[controller]",
+        "lambda1 = 1.0",
+        "lambda2 = 2.0",
+        "",
+        "# 95 % intervals of the fit as absolute half-widths; inf = not determined.",
+        result.to_uncertainty().to_toml().rstrip("\n"),
+    ]
+    return "\n".join(head + body) + "\n"

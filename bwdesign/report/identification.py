@@ -1,0 +1,191 @@
+"""The identification report: one fit in, Markdown + HTML (+ JSON, figures) out.
+
+Same document model as the certified-gains report
+(:class:`bwdesign.report.document.Document`): measured vs model over time,
+the hysteresis loop, residual autocorrelation and spectrum, the parameter
+table with intervals, the correlation matrix and the diagnostics.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .._version import __version__
+from ..errors import InputError
+from ..identify.files import SIGNATURE, is_ours, write_file
+from ..identify.result import IdentificationResult
+from ..output.jsonenc import dump_json
+from .document import Document
+
+__all__ = ["identification_document", "write_identification_report"]
+
+NAMES = ("a1", "a2", "a3", "alpha", "beta", "gamma")
+UNITS = {
+    "a1": "1/s^2",
+    "a2": "1/s",
+    "a3": "um/(V s^2)",
+    "alpha": "um/V",
+    "beta": "1/V",
+    "gamma": "1/V",
+}
+
+
+def _g(v: float, digits: int = 6) -> str:
+    return "not determined" if not math.isfinite(v) else f"{v:.{digits}g}"
+
+
+def identification_document(
+    result: IdentificationResult, *, figures: dict[str, str], stage_file: str | None = None
+) -> Document:
+    """Build the report's blocks (figures by relative path)."""
+    p = result.params
+    doc = Document(f"Identification report: {p.name or 'stage'}")
+    fp = result.fit_percent
+    val = f"{fp['validation']:.3f} %" if fp["validation"] is not None else "no validation record"
+    bad = [n for n in NAMES if not result.determined[n]]
+    verdict = (
+        f"Fit {fp['train']:.3f} % (training), {val} (validation); residual RMS "
+        f"{result.residual_rms:.4g} um. "
+        + (
+            f"NOT determined by the record: {', '.join(bad)}."
+            if bad
+            else "Every parameter determined."
+        )
+    )
+    doc.callout(verdict if result.converged else f"DID NOT CONVERGE: {result.reason}. {verdict}")
+    if stage_file:
+        doc.para(
+            f"Stage file: `{stage_file}` ([plant], [sampling], [uncertainty] with these 95 % "
+            f"intervals). Certify gains for it with `bwdesign report --config {stage_file} "
+            "--out DIR` after replacing its placeholder [reference]."
+        )
+    if result.diagnostics:
+        doc.heading("Diagnostics")
+        doc.bullets(list(result.diagnostics))
+    doc.heading("Parameters")
+    rows = []
+    for n in NAMES:
+        v, se = getattr(p, n), result.std_err[n]
+        lo, hi = result.ci95[n]
+        rel = 1.96 * se / abs(v) if math.isfinite(se) and v else math.inf
+        rows.append(
+            [
+                n,
+                f"{v:.6g}",
+                UNITS[n],
+                _g(se, 3),
+                f"[{_g(lo)}, {_g(hi)}]" if math.isfinite(lo) else "not determined",
+                "yes" if result.determined[n] else "**no**",
+                "inf" if not math.isfinite(rel) else f"{100 * rel:.3g} %",
+            ]
+        )
+    doc.table(
+        ["parameter", "value", "unit", "std. error", "95 % interval", "determined", "± (rel.)"],
+        rows,
+        id="params",
+    )
+    d = result.derived
+    doc.table(
+        ["derived quantity", "value", "std. error"],
+        [
+            [
+                "static gain a3/a1 (um/V)",
+                f"{d['static_gain']['value']:.6g}",
+                _g(d["static_gain"]["std_err"], 3),
+            ],
+            ["lag a2/a1 (s)", f"{d['lag']['value']:.6g}", _g(d["lag"]["std_err"], 3)],
+            [
+                "natural frequency (Hz)",
+                f"{d['natural_frequency']['value']:.6g}",
+                _g(d["natural_frequency"]["std_err"], 3),
+            ],
+            [
+                "damping ratio",
+                f"{d['damping_ratio']['value']:.4g}",
+                _g(d["damping_ratio"]["std_err"], 3),
+            ],
+            ["sensor offset (um)", f"{result.offset:.6g}", _g(result.offset_std_err, 3)],
+            ["input delay (samples)", str(result.delay_samples), "-"],
+        ],
+    )
+    doc.para(f"Intervals: {result.covariance_method}.")
+    doc.heading("Correlation matrix")
+    corr = result.correlation
+    doc.table(
+        ["", *NAMES],
+        [
+            [n] + ["-" if not np.isfinite(c) else f"{c:+.3f}" for c in corr[i]]
+            for i, n in enumerate(NAMES)
+        ],
+        id="correlation",
+    )
+    doc.heading("Measured and model")
+    doc.figure(figures["time"], "Displacement over time, measured and model, and the residual.")
+    doc.figure(figures["loop"], "Hysteresis loop u vs y, measured and model.")
+    doc.heading("Residuals")
+    doc.figure(
+        figures["residuals"],
+        "Residual autocorrelation (dotted: the ±2/sqrt(N) band of white noise) and spectrum.",
+    )
+    doc.heading("Reproducibility")
+    doc.pre(
+        f"bwdesign {__version__}\nsamples {result.n_samples}, dt {result.dt!r} s\n"
+        f"starts {result.n_starts}, residual evaluations {result.nfev}, "
+        f"{result.seconds:.2f} s\nconverged {result.converged}: {result.reason}"
+    )
+    return doc
+
+
+def write_identification_report(
+    result: IdentificationResult, out_dir: str | Path, *, stage_file: str | Path | None = None
+) -> Path:
+    """Write report.md, report.html, identification.json and PNG figures into ``out_dir``.
+
+    An existing ``out_dir`` is replaced only if it holds a report bwdesign wrote
+    (or is empty); the new one is built beside it and renamed into place.
+
+    Raises
+    ------
+    InputError
+        ``out_dir`` exists and is not a bwdesign report directory.
+    """
+    from ..plotting.figures import save_figure
+    from ..plotting.identification import plot_fit_loop, plot_fit_time, plot_residuals
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and (
+        not out_dir.is_dir() or (any(out_dir.iterdir()) and not is_ours(out_dir / "report.md"))
+    ):
+        raise InputError(
+            f"{out_dir} exists and is not a report bwdesign wrote; refusing to replace it"
+        )
+    parent = out_dir.resolve().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
+    try:
+        tr = result.traces
+        figs = {"time": "fit_time.png", "loop": "fit_loop.png", "residuals": "residuals.png"}
+        for key, fig in (
+            ("time", plot_fit_time(tr, title=result.params.name)[0]),
+            ("loop", plot_fit_loop(tr)[0]),
+            ("residuals", plot_residuals(tr["y"] - tr["y_model"], result.dt)[0]),
+        ):
+            save_figure(fig, tmp / figs[key])
+        doc = identification_document(
+            result, figures=figs, stage_file=str(stage_file) if stage_file else None
+        )
+        sig = f"<!-- {SIGNATURE} {__version__} (identify) -->\n"
+        write_file(tmp / "report.md", sig + doc.to_markdown())
+        write_file(tmp / "report.html", sig + doc.to_html(tmp))
+        write_file(tmp / "identification.json", dump_json(result.to_dict()) + "\n")
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        tmp.rename(out_dir)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out_dir

@@ -1,0 +1,313 @@
+"""Identification input and output: the bad-data table, [uncertainty], the commands."""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+
+import numpy as np
+import pytest
+
+from bwdesign import ConfigError, InputError, ParameterError, UncertaintyBox, load_config, preset
+from bwdesign.cli import main
+from bwdesign.identify import MIN_SAMPLES, load_data
+from bwdesign.identify.excite import design_excitation, simulate_record
+
+GOOD_T = np.arange(400) * 1e-3
+GOOD_U = 5 + 4 * np.sin(2 * np.pi * 5 * GOOD_T)
+GOOD_Y = 1.4 * GOOD_U
+
+
+def _csv(path, header, rows):
+    path.write_text(header + "\n" + "\n".join(",".join(map(str, r)) for r in rows) + "\n")
+    return path
+
+
+def _rows(t=GOOD_T, u=GOOD_U, y=GOOD_Y):
+    return list(zip(t, u, y, strict=True))
+
+
+def _with(rows, i, col, value):
+    rows = [list(r) for r in rows]
+    rows[i][col] = value
+    return rows
+
+
+#: The bad-data table: each case, and the error message it gets (InputError, exit 2).
+BAD = [
+    ("missing_column", "t,u,z", _rows(), r"missing column\(s\) y"),
+    ("non_numeric", "t,u,y", _with(_rows(), 7, 1, "abc"), r"non-numeric value 'abc' in column u"),
+    (
+        "nan_row",
+        "t,u,y",
+        _with(_rows(), 9, 2, "nan"),
+        r"NaN or infinite values, first at data row 10",
+    ),
+    ("inf_row", "t,u,y", _with(_rows(), 3, 1, "inf"), r"NaN or infinite"),
+    ("non_increasing", "t,u,y", _with(_rows(), 5, 0, 0.001), r"t is not increasing"),
+    (
+        "non_uniform",
+        "t,u,y",
+        _with(_rows(), 50, 0, 0.0503),
+        r"not uniformly sampled.*tolerance 0.1 %",
+    ),
+    ("too_few", "t,u,y", _rows()[: MIN_SAMPLES - 1], rf"needs at least {MIN_SAMPLES}"),
+    ("input_never_moves", "t,u,y", _rows(u=np.full(400, 2.0)), r"input u never moves"),
+    ("output_never_moves", "t,u,y", _rows(y=np.zeros(400)), r"output y never moves"),
+    ("short_row", "t,u,y", [*_rows()[:300], (0.3,)], r"has no value for column u"),
+]
+
+
+@pytest.mark.parametrize("header,rows,match", [b[1:] for b in BAD], ids=[b[0] for b in BAD])
+def test_bad_data_table(tmp_path, header, rows, match):
+    path = _csv(tmp_path / "d.csv", header, rows)
+    with pytest.raises(InputError, match=match):
+        load_data(path)
+
+
+@pytest.mark.parametrize("header,rows,match", [b[1:] for b in BAD[:3]], ids=[b[0] for b in BAD[:3]])
+def test_bad_data_exit_2_nothing_written(tmp_path, capsys, header, rows, match):
+    path = _csv(tmp_path / "d.csv", header, rows)
+    out = tmp_path / "stage.toml"
+    assert main(["identify", "--data", str(path), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error:") and err.count("\n") == 1
+    assert not out.exists()
+
+
+def test_columns_mapping_extra_columns_and_npz(tmp_path):
+    rows = [(a, b, c, 0.0) for a, b, c in _rows()]
+    path = _csv(tmp_path / "d.csv", "# a comment line\ntime,volts,extra,um", [])
+    path.write_text(
+        "# a comment line\ntime,volts,um,extra\n"
+        + "\n".join(f"{a},{b},{c},{d}" for a, b, c, d in rows)
+        + "\n"
+    )
+    rec = load_data(path, columns="time,volts,um")
+    assert rec.n == 400 and rec.dt == pytest.approx(1e-3)
+    np.savez(tmp_path / "d.npz", t=GOOD_T, u=GOOD_U, y=GOOD_Y)
+    assert load_data(tmp_path / "d.npz").n == 400
+    with pytest.raises(InputError, match="missing array"):
+        load_data(tmp_path / "d.npz", columns="t,u,disp")
+    with pytest.raises(InputError, match="does not exist"):
+        load_data(tmp_path / "nope.csv")
+
+
+# -- [uncertainty] -------------------------------------------------------------
+
+
+def test_uncertainty_box_round_trip_and_geometry():
+    p = preset("paper_experiment")
+    box = UncertaintyBox.from_dict(
+        {"source": "specified", "level": 0.9, "a1": {"rel": 0.02}, "alpha": {"abs": 0.01}}
+    )
+    again = UncertaintyBox.from_dict(tomllib.loads(box.to_toml())["uncertainty"])
+    assert again == box
+    assert box.half_width("a1", p) == pytest.approx(0.02 * p.a1)
+    assert box.half_width("beta", p) == 0.0
+    assert box.bounds(p)["alpha"] == pytest.approx((p.alpha - 0.01, p.alpha + 0.01))
+    verts = box.vertices(p)
+    assert len(verts) == 4
+    assert sorted({v.a1 for v in verts}) == pytest.approx([0.98 * p.a1, 1.02 * p.a1])
+    samples = box.sample(p, np.random.default_rng(0), 50)
+    assert all(abs(s.a1 - p.a1) <= 0.02 * p.a1 and s.beta == p.beta for s in samples)
+    assert box.check(p).bounded
+
+
+def test_uncertainty_check_names_vertices_outside_the_class():
+    p = preset("paper_experiment")  # beta 0.3762, gamma 0.0378
+    box = UncertaintyBox.from_dict({"gamma": {"abs": 0.5}})
+    verdict = box.check(p)
+    assert not verdict.bounded
+    assert any("beta - gamma" in r for _, r in verdict.outside)
+    assert any("beta + gamma" in r for _, r in verdict.outside)
+
+
+@pytest.mark.parametrize(
+    "table,match",
+    [
+        ({"a1": {"rel": 0.1, "abs": 1.0}}, "exactly one of rel"),
+        ({"a1": 0.1}, "must be a table"),
+        ({"a4": {"rel": 0.1}}, "unknown key"),
+        ({"a1": {"rel": -0.1}}, ">= 0"),
+        ({"a1": {"rel": "x"}}, "must be a number"),
+        ({"source": "guessed"}, "source must be one of"),
+        ({"level": 1.5}, r"level must be a number in \(0, 1\)"),
+    ],
+    ids=["both", "not_table", "unknown", "negative", "string", "source", "level"],
+)
+def test_uncertainty_strict_keys(table, match):
+    with pytest.raises(ConfigError, match=match):
+        UncertaintyBox.from_dict(table)
+
+
+def test_undetermined_box_refuses_vertices(tmp_path):
+    p = preset("paper_experiment")
+    box = UncertaintyBox.from_dict({"a1": {"rel": math.inf}, "alpha": {"abs": 0.01}})
+    assert box.undetermined() == ("a1",)
+    assert box.bounds(p)["a1"] == (-math.inf, math.inf)
+    with pytest.raises(ParameterError, match="a1 not determined"):
+        box.vertices(p)
+    with pytest.raises(ParameterError, match="a1 not determined"):
+        box.sample(p, np.random.default_rng(0), 3)
+    cfg = tmp_path / "s.toml"
+    cfg.write_text(p.to_toml() + "\n" + box.to_toml())
+    assert load_config(cfg).uncertainty == box
+    cfg.write_text(p.to_toml())
+    assert load_config(cfg).uncertainty is None
+
+
+# -- commands --------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def records(tmp_path_factory):
+    d = tmp_path_factory.mktemp("rec")
+    plant = preset("paper_experiment")
+    for name, kind, seed in (("train", "multisine", 0), ("valid", "triangle-sweep", 3)):
+        assert (
+            main(
+                [
+                    "excite",
+                    "--plant",
+                    "paper_experiment",
+                    "--kind",
+                    kind,
+                    "--umin",
+                    "0",
+                    "--umax",
+                    "120",
+                    "--udot-max",
+                    "2000",
+                    "--duration",
+                    "0.5",
+                    "--dt",
+                    "2e-4",
+                    "--seed",
+                    str(seed),
+                    "--simulate-noise",
+                    "0.01",
+                    "--offset",
+                    "3",
+                    "--out",
+                    str(d / f"{name}.csv"),
+                ]
+            )
+            == 0
+        )
+    return d, plant
+
+
+def test_excite_respects_range_and_rate(records, capsys):
+    d, _ = records
+    text = (d / "train.csv").read_text()
+    assert text.startswith("# written by bwdesign")
+    assert "SIMULATED, NOT MEASURED" in text and "Regenerate: bwdesign excite" in text
+    rec = load_data(d / "train.csv")
+    assert rec.u.min() >= 0 and rec.u.max() <= 120
+    assert np.max(np.abs(np.diff(rec.u))) / rec.dt <= 2000 * (1 + 1e-9)
+    for kind in ("multisine", "triangle-sweep"):
+        t, u = design_excitation(
+            preset("paper_simulation_corrected"),
+            kind=kind,
+            umin=-1,
+            umax=7,
+            udot_max=5e3,
+            duration=0.05,
+            dt=1e-5,
+        )
+        assert (
+            u.min() >= -1 and u.max() <= 7 and np.max(np.abs(np.diff(u))) <= 5e3 * 1e-5 * 1.000001
+        )
+
+
+def test_identify_command_writes_a_stage_every_command_accepts(records, capsys, tmp_path):
+    d, plant = records
+    out = tmp_path / "stage.toml"
+    rc = main(
+        [
+            "identify",
+            "--data",
+            str(d / "train.csv"),
+            "--validate",
+            str(d / "valid.csv"),
+            "--out",
+            str(out),
+            "--json",
+            "--multistart",
+            "1",
+        ]
+    )
+    cap = capsys.readouterr()
+    assert rc == 0, cap.err
+    assert "identify:" in cap.err  # progress on stderr
+    doc = json.loads(cap.out)
+    assert set(doc["params"]) == {"a1", "a2", "a3", "alpha", "beta", "gamma"}
+    assert set(doc["fit_percent"]) >= {"train", "validation"}
+    assert doc["fit_percent"]["validation"] > 99.5
+    assert doc["residual_rms"] == pytest.approx(0.01, rel=0.15)
+    for n, (lo, hi) in doc["ci95"].items():
+        assert lo < doc["params"][n] < hi
+    cfg = load_config(out)
+    assert cfg.dt == pytest.approx(2e-4)
+    assert cfg.uncertainty is not None and cfg.uncertainty.source == "identified"
+    assert abs(cfg.plant.a1 / plant.a1 - 1) < 0.01
+    assert cfg.envelope() is not None and cfg.controller is not None
+    assert main(["params", "--plant", str(out), "--json"]) == 0
+    # a second run may replace bwdesign's own file, never a user's
+    user = tmp_path / "mine.toml"
+    user.write_text("[plant]\n")
+    rc = main(["identify", "--data", str(d / "train.csv"), "--out", str(user), "--quiet"])
+    assert rc == 2 and user.read_text() == "[plant]\n"
+    assert "not written by bwdesign" in capsys.readouterr().err
+
+
+def test_identify_not_converged_exit_1(records, capsys, tmp_path):
+    d, _ = records
+    out = tmp_path / "s.toml"
+    rc = main(
+        [
+            "identify",
+            "--data",
+            str(d / "train.csv"),
+            "--out",
+            str(out),
+            "--quiet",
+            "--multistart",
+            "1",
+            "--max-nfev",
+            "1",
+        ]
+    )
+    assert rc == 1
+    assert "did not converge" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_simulated_record_with_amplifier_lag_differs():
+    p = preset("paper_experiment")
+    u = 10 + np.sin(np.arange(500) * 0.05)
+    a = simulate_record(p, u, 2e-4, noise=0.0)
+    b = simulate_record(p, u, 2e-4, noise=0.0, amplifier_lag=1e-3)
+    assert 0 < np.max(np.abs(a.y - b.y)) < 0.5
+
+
+def test_identify_report(records, capsys, tmp_path):
+    d, _ = records
+    out, rep = tmp_path / "stage.toml", tmp_path / "rep"
+    args = ["identify", "--data", str(d / "train.csv"), "--out", str(out), "--quiet"]
+    assert main([*args, "--multistart", "1", "--report", str(rep)]) == 0
+    md = (rep / "report.md").read_text()
+    for text in ("95 % interval", "Correlation matrix", "Hysteresis loop", "autocorrelation"):
+        assert text in md
+    html = (rep / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 3
+    assert json.loads((rep / "identification.json").read_text())["converged"] is True
+    # rerun replaces its own report; a foreign directory is refused
+    assert main([*args, "--multistart", "1", "--report", str(rep)]) == 0
+    foreign = tmp_path / "notes"
+    foreign.mkdir()
+    (foreign / "mine.txt").write_text("keep")
+    assert main([*args, "--multistart", "1", "--report", str(foreign)]) == 2
+    assert (foreign / "mine.txt").read_text() == "keep"
