@@ -23,7 +23,7 @@ from typing import Any
 from .._version import __version__
 from ..certify.synthesis import default_pole_radius
 from ..errors import ConfigError
-from ..model.params import BoucWenParams
+from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.requirements import REQUIREMENT_KEYS, SETTING_KEYS
 from ..model.stage_presets import stage_preset_path, stage_presets
 from ..output.jsonenc import dump_json
@@ -89,6 +89,14 @@ _SPEC: dict[str, list[tuple[str, str, str | None]]] = {
         ("decay", "1/s: decay rate asked of the synthesised gains", "100.0"),
         ("pole_radius", "rad/s: observer pole-disk radius", None),
     ],
+    "uncertainty": [
+        ("source", '"identified" (bwdesign identify writes it) or "specified"', None),
+        ("level", "confidence level of the half-widths when they are intervals, e.g. 0.95", None),
+    ]
+    + [
+        (k, "{ rel = 0.02 } (fraction of the nominal) or { abs = x }; unlisted = exact", None)
+        for k in MODEL_FIELDS
+    ],
     # one source: the requirements schema (bwdesign check, bwdesign.testing)
     "requirements": [(k, meaning, None) for k, (_, meaning) in REQUIREMENT_KEYS.items()]
     + [(k, meaning, None) for k, (_, meaning) in SETTING_KEYS.items()],
@@ -106,6 +114,7 @@ _HEADINGS = {
     "envelope": "the input-rate envelope |u'| <= udot_max the certificates hold for",
     "reference": "the trajectory to track (the report needs it)",
     "synthesis": "what the report asks of the gain synthesis (optional)",
+    "uncertainty": "parameter half-widths: the sweep's box, the requirements' corners (optional)",
     "requirements": "what `bwdesign check` and your CI demand of the stage (optional)",
 }
 _SECTION_ORDER = (
@@ -116,6 +125,7 @@ _SECTION_ORDER = (
     "reference",
     "envelope",
     "synthesis",
+    "uncertainty",
     "requirements",
 )
 

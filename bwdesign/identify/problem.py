@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from ..model.params import BoucWenParams
+from ..model.params import A3_MAGNITUDE, PARAM_RANGES, BoucWenParams
 from .simulate import hysteresis_path, linear_matrices, linear_response
 
 __all__ = ["FIT_NAMES", "Problem", "params_from_theta", "theta_from_params"]
@@ -52,18 +52,29 @@ Q_MAX = 8.0
 
 def params_from_theta(theta: np.ndarray, sign: float, name: str = "") -> BoucWenParams:
     """The Bouc-Wen parameters of a fit vector."""
-    k = sign * math.exp(theta[IK])
-    wn2 = math.exp(2.0 * theta[IW])
-    beta = math.exp(theta[IB])
+    wn2 = _clip(math.exp(min(2.0 * theta[IW], 700.0)), "a1")
+    a3 = _clip(math.exp(min(theta[IK], 700.0)) * wn2, "a3", magnitude=True)
+    beta = _clip(math.exp(min(theta[IB], 700.0)), "beta")
     return BoucWenParams(
         a1=wn2,
-        a2=math.exp(theta[ITAU]) * wn2,
-        a3=k * wn2,
-        alpha=math.exp(theta[IA]),
+        a2=_clip(math.exp(min(theta[ITAU], 700.0)) * wn2, "a2"),
+        a3=sign * a3,
+        alpha=_clip(math.exp(min(theta[IA], 700.0)), "alpha"),
         beta=beta,
         gamma=beta * math.tanh(theta[IQ]),
         name=name,
     )
+
+
+def _clip(value: float, name: str, *, magnitude: bool = False) -> float:
+    """``value`` held inside the package's supported range of ``name``.
+
+    Far outside the data's reach a fit vector may ask for, e.g., a1 = 1e18; the
+    parameters are clipped to :data:`bwdesign.model.params.PARAM_RANGES` (where
+    the fit is flat, so the optimiser turns back) instead of being refused.
+    """
+    r = A3_MAGNITUDE if magnitude else PARAM_RANGES[name]
+    return min(max(value, r.lo), r.hi)
 
 
 def theta_from_params(p: BoucWenParams) -> tuple[np.ndarray, float]:

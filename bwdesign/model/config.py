@@ -93,7 +93,7 @@ class StageConfig:
     requirements : dict or None
         The ``[requirements]`` a user's CI checks (:mod:`bwdesign.model.requirements`).
     uncertainty : UncertaintyBox or None
-        The ``[uncertainty]`` section (None when absent).
+        The ``[uncertainty]`` section (None when absent or when it lists no parameter).
     source : str
         Path of the file.
     sha256 : str
@@ -255,6 +255,8 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     uncertainty = None
     if "uncertainty" in data:
         uncertainty = UncertaintyBox.from_dict(data["uncertainty"])
+        if not uncertainty.widths:  # a section with no parameter: every parameter exact
+            uncertainty = None
 
     return StageConfig(
         plant=plant,
