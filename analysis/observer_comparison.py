@@ -63,6 +63,7 @@ from bwdesign import (
     tracking_metrics,
 )
 from bwdesign.model.envelope import feedforward_input
+from bwdesign.output.files import prepare_directory
 from bwdesign.plotting.figures import plot_estimation_errors, plot_observer_states, save_figure
 
 NOISE_STD = 0.01  # um, on the displacement measurement
@@ -350,8 +351,14 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="reports/observers", help="output directory")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    # through the output layer: a directory holding other files is refused, the old output
+    # stays whole until the new one is complete
+    target = prepare_directory(args.out, command="analysis observer_comparison", what="--out")
+    with target.stage() as stage:
+        return _run(args, stage.root)
+
+
+def _run(args: argparse.Namespace, out: Path) -> int:
     meta = {
         "versions": {
             "bwdesign": bwdesign.__version__,

@@ -47,6 +47,7 @@ import bwdesign
 from bwdesign import Sine, Step, Triangle, preset
 from bwdesign.control.analysis import analyze_loop, mismatch_sweep
 from bwdesign.control.tuning import digital_tuning, observer_gains
+from bwdesign.output.files import prepare_directory
 from bwdesign.sim.closed_loop import simulate
 from bwdesign.sim.continuous import simulate_continuous
 from bwdesign.sim.result import SimulationResult
@@ -186,8 +187,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="reports/paper", help="output directory")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     args = ap.parse_args(argv)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    # through the output layer: a directory holding other files is refused, the old output
+    # stays whole until the new one is complete
+    target = prepare_directory(args.out, command="analysis paper_tables", what="--out")
+    with target.stage() as stage:
+        return _run(args, stage.root)
+
+
+def _run(args: argparse.Namespace, out: Path) -> int:
     from bwdesign.plotting.figures import (
         plot_loop_poles,
         plot_mismatch_sweep,

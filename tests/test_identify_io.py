@@ -260,7 +260,7 @@ def test_identify_command_writes_a_stage_every_command_accepts(records, capsys, 
     user.write_text("[plant]\n")
     rc = main(["identify", "--data", str(d / "train.csv"), "--out", str(user), "--quiet"])
     assert rc == 2 and user.read_text() == "[plant]\n"
-    assert "not written by bwdesign" in capsys.readouterr().err
+    assert "bwdesign never overwrites other files" in capsys.readouterr().err
 
 
 def test_identify_not_converged_exit_1(records, capsys, tmp_path):

@@ -177,7 +177,9 @@ def test_init_writes_once_and_never_overwrites(tmp_path, capsys):
     path = tmp_path / "stage.toml"
     assert main(["init", str(path)]) == 0
     assert capsys.readouterr().out.startswith(f"wrote {path}; next: bwdesign report")
-    assert path.read_text() == init_cmd.starter_config()
+    first, rest = path.read_text().split("\n", 1)
+    assert first.startswith("# written by bwdesign") and "(init)" in first
+    assert rest == init_cmd.starter_config()
     path.write_text("# mine\n")
     assert main(["init", str(path), "--preset", "stack_actuator_800hz"]) == 2
     err = capsys.readouterr().err
@@ -216,9 +218,13 @@ def test_the_new_file_follows_the_umask(tmp_path):
 
 def test_create_new_refuses_an_existing_target_even_after_the_check(tmp_path):
     """The link is the guard: a file that appears after the exists-check is kept."""
+    from bwdesign.errors import OutputError
+    from bwdesign.output.files import prepare_file
+
     path = tmp_path / "stage.toml"
+    target = prepare_file(path, command="init", exclusive=True)
     path.write_text("theirs\n")
-    with pytest.raises(FileExistsError):
-        init_cmd._create_new(path, "ours\n")
+    with pytest.raises(OutputError, match="appeared while bwdesign worked"):
+        target.write_text("ours\n")
     assert path.read_text() == "theirs\n"
     assert [p.name for p in tmp_path.iterdir()] == ["stage.toml"]

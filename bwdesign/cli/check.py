@@ -8,12 +8,10 @@ that cannot be read, a malformed section, a requirement whose section is missing
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
-from pathlib import Path
 
 from ..errors import BWDesignError
+from ..output.files import prepare_file
 from ..output.jsonenc import dump_json
 from ..testing.checks import check_requirements
 from ..testing.junit import junit_xml
@@ -30,6 +28,11 @@ def check_args(p: argparse.ArgumentParser) -> None:
 
 
 def run_check(args: argparse.Namespace) -> int:
+    junit = None
+    if args.junit_xml is not None:
+        junit = prepare_file(
+            args.junit_xml, command="check junit", comment="<!--", what="--junit-xml"
+        )
     results = []
     bad = False
     for f in args.files:
@@ -40,8 +43,8 @@ def run_check(args: argparse.Namespace) -> int:
             results.append((f, " ".join(str(err).split())))
             bad = True
     failed = any(isinstance(c, list) and not all(x.passed for x in c) for _, c in results)
-    if args.junit_xml:
-        _write(args.junit_xml, junit_xml(results))
+    if junit is not None:
+        junit.write_text(junit_xml(results))
     if args.json:
         print(
             dump_json(
@@ -79,11 +82,3 @@ def run_check(args: argparse.Namespace) -> int:
     if bad:
         return EXIT_BAD_INPUT
     return EXIT_NO if failed else EXIT_OK
-
-
-def _write(path: str, text: str) -> None:
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent or ".")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, target)

@@ -13,8 +13,8 @@ import numpy as np
 
 from .._version import __version__
 from ..identify.excite import KINDS, design_excitation, simulate_record
-from ..identify.files import SIGNATURE, write_file
 from ..model.config import load_plant
+from ..output.files import prepare_file
 from ..output.jsonenc import dump_json
 from .args import EXIT_OK, UsageError, finite_float, nonneg_float, positive_float
 
@@ -53,6 +53,7 @@ def run_excite(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".csv":
         raise UsageError(f"--out must be a .csv file, got {args.out!r}")
+    target = prepare_file(out, command="excite", what="--out")
     plant = load_plant(args.plant)
     t, u = design_excitation(
         plant,
@@ -70,7 +71,7 @@ def run_excite(args: argparse.Namespace) -> int:
         f"--dt {args.dt:g} --seed {args.seed}"
     )
     head = [
-        f"# {SIGNATURE} {__version__} (excite): {args.kind} input for identification,",
+        f"# bwdesign {__version__} excite: {args.kind} input for identification,",
         f"# within [{args.umin:g}, {args.umax:g}] V and |du/dt| <= {args.udot_max:g} V/s.",
         "# Units: t s, u V (held over each sample), y um (at the end of each sample).",
     ]
@@ -90,7 +91,7 @@ def run_excite(args: argparse.Namespace) -> int:
         )
     head.append(f"# Regenerate: {cmd} --out {out.name}")
     rows = "\n".join(",".join(f"{v:.12g}" for v in row) for row in zip(*cols, strict=True))
-    write_file(out, "\n".join(head) + "\n" + names + "\n" + rows + "\n")
+    target.write_text("\n".join(head) + "\n" + names + "\n" + rows + "\n")
     summary = {
         "out": str(out),
         "kind": args.kind,

@@ -11,8 +11,8 @@ import sys
 from pathlib import Path
 
 from ..identify import identify, load_data
-from ..identify.files import write_file
 from ..identify.stagefile import stage_toml
+from ..output.files import prepare_directory, prepare_file
 from ..output.jsonenc import dump_json
 from .args import EXIT_NO, EXIT_OK, UsageError
 
@@ -49,6 +49,10 @@ def run_identify(args: argparse.Namespace) -> int:
         raise UsageError(f"--out must be a .toml file, got {args.out!r}")
     if args.multistart < 1 or args.max_nfev < 1:
         raise UsageError("--multistart and --max-nfev must be >= 1")
+    target = prepare_file(out, command="identify", what="--out")
+    report = None
+    if args.report:
+        report = prepare_directory(args.report, command="identify --report", what="--report")
     data = load_data(args.data, columns=args.columns)
     valid = load_data(args.validate, columns=args.columns) if args.validate else None
     fixed = tuple(f.strip() for f in args.fixed.split(",")) if args.fixed else ()
@@ -74,12 +78,12 @@ def run_identify(args: argparse.Namespace) -> int:
             print(dump_json(doc))
         print(f"identify: the fit did not converge: {result.reason}", file=sys.stderr)
         return EXIT_NO
-    write_file(out, stage_toml(result, data))
+    target.write_text(stage_toml(result, data))
     doc["out"] = str(out)
-    if args.report:
+    if report is not None:
         from ..report.identification import write_identification_report
 
-        doc["report"] = str(write_identification_report(result, args.report, stage_file=out))
+        doc["report"] = str(write_identification_report(result, report, stage_file=out))
     if args.json:
         print(dump_json(doc))
     else:

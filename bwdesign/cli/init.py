@@ -13,11 +13,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import tempfile
 import textwrap
 import tomllib
-from pathlib import Path
 from typing import Any
 
 from .._version import __version__
@@ -26,6 +23,7 @@ from ..errors import ConfigError
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.requirements import REQUIREMENT_KEYS, SETTING_KEYS
 from ..model.stage_presets import stage_preset_path, stage_presets
+from ..output.files import prepare_file
 from ..output.jsonenc import dump_json
 from .args import EXIT_OK
 
@@ -250,28 +248,6 @@ def starter_config(preset: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _create_new(path: Path, text: str) -> None:
-    """Create ``path`` holding ``text`` atomically, failing if it exists.
-
-    The text goes to a temporary file in the same folder, which is then
-    hard-linked to ``path`` (``os.link`` fails when ``path`` exists, so nothing
-    is ever overwritten, even in a race) and unlinked. The mode follows the
-    user's umask, as for any new file.
-    """
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.link(tmp, path)
-    finally:
-        os.unlink(tmp)
-
-
 def init_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("path", metavar="STAGE.toml", help="file to write (must not exist)")
     p.add_argument(
@@ -283,19 +259,9 @@ def init_args(p: argparse.ArgumentParser) -> None:
 
 
 def run_init(args: argparse.Namespace) -> int:
-    path = Path(args.path)
-    text = starter_config(args.preset)
-    if path.exists() or path.is_symlink():
-        raise ConfigError(f"{path} already exists; not overwritten (choose another name)")
-    if not path.parent.is_dir():
-        raise ConfigError(f"cannot write {path}: folder {str(path.parent)!r} does not exist")
-    try:
-        _create_new(path, text)
-    except FileExistsError:
-        raise ConfigError(f"{path} already exists; not overwritten (choose another name)") from None
-    except OSError as err:
-        raise ConfigError(f"cannot write {path}: {err.strerror}") from None
-    print(f"wrote {path}; next: bwdesign report --config {path} --out report")
+    target = prepare_file(args.path, command="init", exclusive=True, what="STAGE.toml")
+    target.write_text(starter_config(args.preset))
+    print(f"wrote {target.path}; next: bwdesign report --config {target.path} --out report")
     return EXIT_OK
 
 

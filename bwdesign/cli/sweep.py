@@ -17,6 +17,7 @@ from ..errors import ConfigError, InputError
 from ..extras import require
 from ..model.config import load_config
 from ..model.params import MODEL_FIELDS
+from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from ..sim.sweep import (
     METRIC_COLUMNS,
@@ -145,6 +146,11 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
         metavar="S",
         help="seconds to wait for --scheduler",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a directory holding other files (they are kept, never overwritten)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
@@ -221,6 +227,7 @@ def _progress(quiet: bool):
 def run_sweep_command(args: argparse.Namespace) -> int:
     from ..report.sweep import write_sweep
 
+    target = prepare_directory(args.out, command="sweep", force=args.force, what="--out")
     config = load_config(args.config)
     spec = _spec(config, args)
     if args.uncertainty is not None:
@@ -231,7 +238,15 @@ def run_sweep_command(args: argparse.Namespace) -> int:
             raise ConfigError(
                 f"{config.source or 'config'}: no [uncertainty] section; give --uncertainty"
             )
-        bounds = check_box(spec.params, box.bounds(spec.params))
+        b = box.bounds(spec.params)
+        open_ = [k for k, (lo, hi) in b.items() if not (math.isfinite(lo) and math.isfinite(hi))]
+        if open_:
+            raise ConfigError(
+                f"{config.source or 'config'}: [uncertainty] leaves {', '.join(open_)} "
+                "undetermined (infinite half-width); a sweep needs a finite box: give "
+                "--uncertainty or finite half-widths"
+            )
+        bounds = check_box(spec.params, {k: v for k, v in b.items() if v[0] != v[1]})
     scenarios = draw_scenarios(
         spec.params, bounds, args.samples, seed=args.seed, distribution=args.distribution
     )
@@ -253,7 +268,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     settings = {"seed": args.seed, "distribution": args.distribution, "samples": args.samples}
-    summary = write_sweep(args.out, spec, table, bounds, settings)
+    summary = write_sweep(target, spec, table, bounds, settings)
     if args.json:
         print(
             dump_json(

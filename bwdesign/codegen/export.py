@@ -33,9 +33,7 @@ the state's ``uncovered`` flag is set and ``guard_trips`` counts it.
 from __future__ import annotations
 
 import math
-import os
 import re
-import tempfile
 from dataclasses import dataclass, field
 from importlib.resources import files
 from pathlib import Path
@@ -54,6 +52,7 @@ from ..model.params import require_bounded
 from ..model.plant import discretize
 from ..observers.base import _SampledObserver
 from ..observers.sampled import ExtendedStateObserver, HysteresisObserver
+from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from .literals import CTypes
 
@@ -516,7 +515,7 @@ def export_c(
     allow_uncertified : bool
         Export gains that no certificate tier holds for (the header says so).
     force : bool
-        Passed to the output layer.
+        Write into a directory holding files bwdesign did not write (they are kept).
 
     Returns
     -------
@@ -529,9 +528,7 @@ def export_c(
     ConfigError, InputError, UnboundedModelError
         Bad configuration or options; nothing is written.
     """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {str(out)!r} exists and is not a directory")
+    target = prepare_directory(out_dir, command="export-c", force=force, what="--out")
     sources, certified, summary, document = c_sources(
         config,
         precision=precision,
@@ -541,16 +538,13 @@ def export_c(
         allow_uncertified=allow_uncertified,
         allow_unbounded=allow_unbounded,
     )
-    _write(out, sources, force=force)
+    with target.stage() as stage:
+        for name, text in sources.items():
+            stage.write_text(name, text)
     return CExport(
-        out_dir=out, files=tuple(sources), certified=certified, summary=summary, document=document
+        out_dir=target.path,
+        files=tuple(sources),
+        certified=certified,
+        summary=summary,
+        document=document,
     )
-
-
-def _write(out: Path, sources: dict[str, str], *, force: bool) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    for name, text in sources.items():
-        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", dir=out)
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, out / name)

@@ -6,7 +6,6 @@ import numpy as np
 
 from .._version import __version__
 from .data import IdentificationData
-from .files import SIGNATURE
 from .result import IdentificationResult
 
 __all__ = ["stage_toml"]
@@ -34,7 +33,7 @@ def stage_toml(result: IdentificationResult, data: IdentificationData) -> str:
     fp = result.fit_percent
     val = f"{fp['validation']:.3f} %" if fp["validation"] is not None else "no validation record"
     head = [
-        f"# {SIGNATURE} {__version__} (identify) from {data.source or 'a record'}:",
+        f"# Identified by bwdesign {__version__} from {data.source or 'a record'}:",
         f"# {data.n} samples at dt = {data.dt:.9g} s. Fit: train {fp['train']:.3f} %, "
         f"validation {val};",
         f"# residual RMS {result.residual_rms:.4g} um; sensor offset {result.offset:.6g} um; "

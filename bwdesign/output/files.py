@@ -562,7 +562,14 @@ def signature_line(command: str, comment: str = "#", digest: str = _PLACEHOLDER)
     being that of every byte after this line: a file edited since is not
     bwdesign's any more.
     """
-    return f"{comment} written by bwdesign {__version__} ({command}) sha256={digest}"
+    return (
+        f"{comment} written by bwdesign {__version__} ({command}) sha256={digest}"
+        f"{_CLOSERS.get(comment, '')}"
+    )
+
+
+#: Comment markers that need a closing mark on the same line (XML, HTML, C block).
+_CLOSERS = {"<!--": " -->", "/*": " */"}
 
 
 def _signed(path: Path, command: str, comment: str | None) -> bool:
@@ -571,7 +578,7 @@ def _signed(path: Path, command: str, comment: str | None) -> bool:
         return False
     pattern = re.compile(
         rf"{re.escape(comment)} written by bwdesign \S+ \({re.escape(command)}\) "
-        r"sha256=(?P<h>[0-9a-f]{64})"
+        r"sha256=(?P<h>[0-9a-f]{64})" + re.escape(_CLOSERS.get(comment, ""))
     )
     try:
         with open(path, "rb") as f:
@@ -619,6 +626,7 @@ class FileTarget:
     command: str
     comment: str | None = "#"
     what: str = "output file"
+    exclusive: bool = False
 
     @contextlib.contextmanager
     def open(self) -> Iterator[IO[str]]:
@@ -643,7 +651,18 @@ class FileTarget:
                         f"{self.what} {str(self.path)!r} became {_kind(st)} while bwdesign "
                         "worked; nothing was replaced"
                     )
-                os.replace(tmp, self.path)
+                if self.exclusive:
+                    # a hard link fails when the target exists: never overwritten, even in a race
+                    try:
+                        os.link(tmp, self.path)
+                    except FileExistsError:
+                        raise OutputError(
+                            f"{self.what} {str(self.path)!r} appeared while bwdesign worked; "
+                            "not overwritten"
+                        ) from None
+                    os.unlink(tmp)
+                else:
+                    os.replace(tmp, self.path)
             except OSError as err:
                 raise _os_error(err, self.what, self.path) from None
         except BaseException:
@@ -663,6 +682,7 @@ def prepare_file(
     command: str,
     comment: str | None = "#",
     what: str = "output file",
+    exclusive: bool = False,
 ) -> FileTarget:
     """Check a single-file output before any work; refuse it with :class:`OutputError`.
 
@@ -676,6 +696,9 @@ def prepare_file(
         formats without comments (an existing file is then always refused).
     what : str
         Name of the target in messages (``"--csv"``).
+    exclusive : bool
+        Refuse any existing file, even one bwdesign wrote (``bwdesign init``);
+        the commit is then a hard link, which fails if the file appeared meanwhile.
 
     Returns
     -------
@@ -710,6 +733,10 @@ def prepare_file(
             )
         if not stat.S_ISREG(st.st_mode):
             raise OutputError(f"{what} {text!r} exists and is {_kind(st)}, not a regular file")
+        if exclusive:
+            raise OutputError(
+                f"{what} {text!r} already exists; not overwritten (choose another name)"
+            )
         if not _writable_file(st, target):
             raise OutputError(f"{what} {text!r} is read-only; bwdesign does not replace it")
         if not _signed(target, command, comment):
@@ -719,7 +746,7 @@ def prepare_file(
                 "or remove it yourself"
             )
     _clear_stale(target)
-    return FileTarget(path=target, command=command, comment=comment, what=what)
+    return FileTarget(path=target, command=command, comment=comment, what=what, exclusive=exclusive)
 
 
 def _writable_file(st: os.stat_result, path: Path) -> bool:

@@ -9,16 +9,13 @@ table with intervals, the correlation matrix and the diagnostics.
 from __future__ import annotations
 
 import math
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from .._version import __version__
-from ..errors import InputError
-from ..identify.files import SIGNATURE, is_ours, write_file
 from ..identify.result import IdentificationResult
+from ..output.files import DirectoryTarget, prepare_directory
 from ..output.jsonenc import dump_json
 from .document import Document
 
@@ -142,32 +139,27 @@ def identification_document(
 
 
 def write_identification_report(
-    result: IdentificationResult, out_dir: str | Path, *, stage_file: str | Path | None = None
+    result: IdentificationResult,
+    target: DirectoryTarget | str | Path,
+    *,
+    stage_file: str | Path | None = None,
 ) -> Path:
-    """Write report.md, report.html, identification.json and PNG figures into ``out_dir``.
+    """Write report.md, report.html, identification.json and PNG figures.
 
-    An existing ``out_dir`` is replaced only if it holds a report bwdesign wrote
-    (or is empty); the new one is built beside it and renamed into place.
+    ``target``: a directory from :func:`bwdesign.output.prepare_directory` (checked
+    before the fit), or a path, checked here; written through the output layer.
 
     Raises
     ------
-    InputError
-        ``out_dir`` exists and is not a bwdesign report directory.
+    OutputError
+        The directory holds files bwdesign did not write, or cannot be written.
     """
     from ..plotting.figures import save_figure
     from ..plotting.identification import plot_fit_loop, plot_fit_time, plot_residuals
 
-    out_dir = Path(out_dir)
-    if out_dir.exists() and (
-        not out_dir.is_dir() or (any(out_dir.iterdir()) and not is_ours(out_dir / "report.md"))
-    ):
-        raise InputError(
-            f"{out_dir} exists and is not a report bwdesign wrote; refusing to replace it"
-        )
-    parent = out_dir.resolve().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
-    try:
+    if not isinstance(target, DirectoryTarget):
+        target = prepare_directory(target, command="identify --report", what="report directory")
+    with target.stage() as stage:
         tr = result.traces
         figs = {"time": "fit_time.png", "loop": "fit_loop.png", "residuals": "residuals.png"}
         for key, fig in (
@@ -175,17 +167,11 @@ def write_identification_report(
             ("loop", plot_fit_loop(tr)[0]),
             ("residuals", plot_residuals(tr["y"] - tr["y_model"], result.dt)[0]),
         ):
-            save_figure(fig, tmp / figs[key])
+            save_figure(fig, stage.file(figs[key]))
         doc = identification_document(
             result, figures=figs, stage_file=str(stage_file) if stage_file else None
         )
-        sig = f"<!-- {SIGNATURE} {__version__} (identify) -->\n"
-        write_file(tmp / "report.md", sig + doc.to_markdown())
-        write_file(tmp / "report.html", sig + doc.to_html(tmp))
-        write_file(tmp / "identification.json", dump_json(result.to_dict()) + "\n")
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        tmp.rename(out_dir)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return out_dir
+        stage.write_text("report.md", doc.to_markdown())
+        stage.write_text("report.html", doc.to_html(stage.root))
+        stage.write_text("identification.json", dump_json(result.to_dict()) + "\n")
+    return target.path

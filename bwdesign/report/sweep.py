@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..model.params import MODEL_FIELDS
+from ..output.files import DirectoryTarget
 from ..sim.closed_loop import simulate
 from ..sim.sweep import SweepSpec
 from .document import Document
@@ -146,7 +147,7 @@ def sweep_document(
 
 
 def write_sweep(
-    out_dir,
+    target: DirectoryTarget,
     spec: SweepSpec,
     table: Mapping[str, np.ndarray],
     bounds: Mapping[str, tuple[float, float]],
@@ -154,35 +155,23 @@ def write_sweep(
 ) -> dict[str, Any]:
     """Write ``scenarios.parquet``, ``summary.json``, ``report.md``/``.html`` and figures.
 
-    Returns the summary (per observer: unstable count, metric quantiles).
+    ``target`` comes from :func:`bwdesign.output.prepare_directory` (checked before
+    the sweep ran). Returns the summary (per observer: unstable count, quantiles).
     """
-    import os
-    import shutil
-    import tempfile
-
     from ..output.jsonenc import dump_json
 
     pa, pq = _pyarrow()
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=".bwdesign-sweep-", dir=out))
-    try:
+    with target.stage() as stage:
         columns = {k: (v.tolist() if v.dtype == object else v) for k, v in table.items()}
-        pq.write_table(pa.table(columns), stage / "scenarios.parquet")
-        doc, summary = sweep_document(spec, table, bounds, out_dir=stage, settings=settings)
-        (stage / "summary.json").write_text(
+        pq.write_table(pa.table(columns), stage.file("scenarios.parquet"))
+        doc, summary = sweep_document(spec, table, bounds, out_dir=stage.root, settings=settings)
+        stage.write_text(
+            "summary.json",
             dump_json({"summary": summary, "bounds": dict(bounds), "settings": dict(settings)})
-            + "\n"
+            + "\n",
         )
-        (stage / "report.md").write_text(doc.to_markdown())
-        (stage / "report.html").write_text(doc.to_html(stage))
-        for path in sorted(stage.rglob("*")):
-            if path.is_file():
-                dest = out / path.relative_to(stage)
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(path, dest)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
+        stage.write_text("report.md", doc.to_markdown())
+        stage.write_text("report.html", doc.to_html(stage.root))
     return summary
 
 

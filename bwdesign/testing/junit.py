@@ -34,6 +34,5 @@ def junit_xml(results: Sequence[tuple[str, list[Check] | str]]) -> str:
         suite.set("failures", str(fails))
         suite.set("errors", "0")
     ET.indent(suites)
-    return (
-        '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
-    )
+    # no XML declaration: the file's first line is bwdesign's signature comment (UTF-8)
+    return ET.tostring(suites, encoding="unicode") + "\n"
