@@ -6,6 +6,7 @@ import json
 import re
 import socket
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -310,4 +311,53 @@ def test_missing_extra_names_it(tmp_path, capsys, monkeypatch):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and err[-1].startswith("error:")
     assert "pip install 'bwdesign[sweep]'" in err[-1]
+    assert not out.exists()
+
+
+def test_report_includes_the_configs_sweep(tmp_path, capsys):
+    """[sweep] in the stage file: the report runs a small sweep over [uncertainty]."""
+    text = Path("configs/stack_actuator_800hz.toml").read_text()
+    text = text.replace("samples = 100", "samples = 4").replace(
+        "[sweep]", "[sweep]\nduration_s = 0.05"
+    )
+    stage = tmp_path / "stage.toml"
+    stage.write_text(text)
+    out = tmp_path / "r"
+    assert main(["report", "--config", str(stage), "--out", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    md = (out / "report.md").read_text()
+    assert "## Robustness over the uncertainty box (Monte Carlo)" in md
+    cert = json.loads((out / "certificate.json").read_text())
+    assert cert["sweep"]["samples"] == 4 and set(cert["sweep"]["summary"]) == {"phso", "eso"}
+    assert (out / "figures" / "sweep_histograms.png").exists()
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (("[uncertainty]", "[not_uncertainty]"), r"unknown section"),
+        (("samples = 100", "samples = 0"), r"\[sweep\] samples must be an integer > 0"),
+        (("samples = 100", 'samples = 100\ntuning = "fast"'), r"\[sweep\] tuning must be one of"),
+        (("samples = 100", 'samples = 100\nobservers = ["ukf"]'), r"\[sweep\] observers"),
+    ],
+)
+def test_report_sweep_bad_input(tmp_path, capsys, edit, message):
+    text = Path("configs/stack_actuator_800hz.toml").read_text().replace(*edit)
+    stage = tmp_path / "stage.toml"
+    stage.write_text(text)
+    out = tmp_path / "r"
+    assert main(["report", "--config", str(stage), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("error:") and re.search(message, err[-1]), err[-1]
+    assert not out.exists()
+
+
+def test_report_sweep_needs_an_uncertainty_box(tmp_path, capsys):
+    text = Path("configs/stack_actuator_800hz.toml").read_text()
+    start, end = text.index("[uncertainty]"), text.index("[sweep]")
+    stage = tmp_path / "stage.toml"
+    stage.write_text(text[:start] + text[end:])
+    out = tmp_path / "r"
+    assert main(["report", "--config", str(stage), "--out", str(out), "--quiet"]) == 2
+    assert "no [uncertainty] section" in capsys.readouterr().err
     assert not out.exists()

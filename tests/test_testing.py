@@ -164,3 +164,4 @@ def test_bundled_stages_meet_their_requirements(capsys):
     assert main(["check", *files]) == 0
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 14 and all(line.startswith("PASS  ") for line in out)
+    assert any("worst of nominal and 64 corners" in line for line in out)

@@ -11,9 +11,7 @@ import argparse
 import math
 import sys
 
-from ..control.controllers import make_controller
-from ..control.tuning import digital_tuning
-from ..errors import ConfigError, InputError
+from ..errors import InputError
 from ..extras import require
 from ..model.config import load_config
 from ..model.params import MODEL_FIELDS
@@ -23,10 +21,11 @@ from ..sim.sweep import (
     METRIC_COLUMNS,
     SweepError,
     SweepSpec,
+    bounds_from_config,
     box_bounds,
-    check_box,
     draw_scenarios,
     run_sweep,
+    spec_from_config,
 )
 from .args import EXIT_NO, EXIT_OK, nonneg_float, positive_float
 
@@ -118,6 +117,12 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
         help="sensor noise std (length unit)",
     )
     p.add_argument("--delay", action="store_true", help="one-sample computation delay")
+    p.add_argument(
+        "--start",
+        choices=("reference", "rest"),
+        default="reference",
+        help="start every scenario on the reference (as the report's runs; default) or at rest",
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
@@ -156,55 +161,16 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
 
 
 def _spec(config, args) -> SweepSpec:
-    missing = [
-        s for s, v in (("[sampling] dt", config.dt), ("[reference]", config.reference)) if v is None
-    ]
-    if args.tuning == "config":
-        if config.gains is None:
-            missing.append("[observer] gains (or --tuning digital)")
-        if config.controller is None:
-            missing.append("[controller] (or --tuning digital)")
-    if missing:
-        raise ConfigError(f"{config.source or 'config'}: sweep needs {', '.join(missing)}")
-    params, dt, ctl = config.plant, config.dt, config.controller
-    limits = (
-        None
-        if ctl is None or (ctl.u_min is None and ctl.u_max is None)
-        else (
-            -math.inf if ctl.u_min is None else ctl.u_min,
-            math.inf if ctl.u_max is None else ctl.u_max,
-        )
-    )
-    if args.tuning == "digital":
-        tune = digital_tuning(params, dt)
-        gains = tuple(tune.gains)
-        controller = make_controller(
-            params,
-            tune.lambda1,
-            tune.lambda2,
-            form="discrete",
-            dt=dt,
-            integral_rate=tune.integral_rate,
-            u_limits=limits,
-        )
-    else:
-        gains = tuple(config.gains)
-        controller = make_controller(
-            params, ctl.lambda1, ctl.lambda2, form=args.form, dt=dt, u_limits=limits
-        )
-    period = config.reference.period
-    duration = args.duration or max(1.0, 3 * period if period else 1.0)
     observers = tuple(o.strip().lower() for o in args.observers.split(",") if o.strip())
-    return SweepSpec(
-        params=params,
-        reference=config.reference,
-        dt=dt,
-        duration=duration,
-        controller=controller,
-        gains=gains,
+    return spec_from_config(
+        config,
+        tuning=args.tuning,
+        form=args.form,
         observers=observers,
         noise_std=args.noise_std,
+        duration=args.duration,
         delay=args.delay,
+        start=args.start,
     )
 
 
@@ -233,20 +199,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     if args.uncertainty is not None:
         bounds = box_bounds(spec.params, parse_uncertainty(args.uncertainty))
     else:
-        box = getattr(config, "uncertainty", None)
-        if box is None:
-            raise ConfigError(
-                f"{config.source or 'config'}: no [uncertainty] section; give --uncertainty"
-            )
-        b = box.bounds(spec.params)
-        open_ = [k for k, (lo, hi) in b.items() if not (math.isfinite(lo) and math.isfinite(hi))]
-        if open_:
-            raise ConfigError(
-                f"{config.source or 'config'}: [uncertainty] leaves {', '.join(open_)} "
-                "undetermined (infinite half-width); a sweep needs a finite box: give "
-                "--uncertainty or finite half-widths"
-            )
-        bounds = check_box(spec.params, {k: v for k, v in b.items() if v[0] != v[1]})
+        bounds = bounds_from_config(config)
     scenarios = draw_scenarios(
         spec.params, bounds, args.samples, seed=args.seed, distribution=args.distribution
     )

@@ -50,6 +50,15 @@ _SECTIONS = {
     "envelope": {"udot_max", "from_reference", "margin"},
     "reference": None,  # checked per kind
     "synthesis": {"decay", "pole_radius"},
+    "sweep": {
+        "samples",
+        "seed",
+        "observers",
+        "tuning",
+        "noise_std_um",
+        "duration_s",
+        "distribution",
+    },
     "requirements": None,  # checked by model.requirements
     "uncertainty": None,  # checked by UncertaintyBox.from_dict
 }
@@ -92,6 +101,8 @@ class StageConfig:
         ``decay`` (1/s) and ``pole_radius`` (rad/s) for the report's gain synthesis.
     requirements : dict or None
         The ``[requirements]`` a user's CI checks (:mod:`bwdesign.model.requirements`).
+    sweep : dict or None
+        The ``[sweep]`` the report runs over ``[uncertainty]`` (off when absent).
     uncertainty : UncertaintyBox or None
         The ``[uncertainty]`` section (None when absent or when it lists no parameter).
     source : str
@@ -109,6 +120,7 @@ class StageConfig:
     synthesis: dict[str, float] | None = None
     requirements: dict[str, Any] | None = None
     uncertainty: UncertaintyBox | None = None
+    sweep: dict[str, Any] | None = None
     source: str = ""
     sha256: str = ""
 
@@ -154,6 +166,40 @@ def _check_keys(table: Any, section: str, allowed: set[str]) -> dict[str, Any]:
             f"{', '.join(sorted(allowed))}"
         )
     return table
+
+
+def _sweep(table: Any) -> dict[str, Any]:
+    """``[sweep]``: a small Monte Carlo sweep over ``[uncertainty]`` in the report."""
+    t = _check_keys(table, "sweep", _SECTIONS["sweep"])
+    if "samples" not in t:
+        raise ConfigError("[sweep]: missing key samples (number of scenarios, > 0)")
+    out: dict[str, Any] = {}
+    for key in ("samples", "seed"):
+        if key in t:
+            v = t[key]
+            if isinstance(v, bool) or not isinstance(v, int) or v < (1 if key == "samples" else 0):
+                raise ConfigError(
+                    f"[sweep] {key} must be an integer {'> 0' if key == 'samples' else '>= 0'}, "
+                    f"got {v!r}"
+                )
+            out[key] = v
+    choices = {"tuning": ("config", "digital"), "distribution": ("uniform", "normal")}
+    for key, allowed in choices.items():
+        if key in t:
+            if t[key] not in allowed:
+                raise ConfigError(f"[sweep] {key} must be one of {allowed}, got {t[key]!r}")
+            out[key] = t[key]
+    if "observers" in t:
+        obs = t["observers"]
+        if not isinstance(obs, list) or not obs or any(o not in ("phso", "eso") for o in obs):
+            raise ConfigError(f'[sweep] observers must be a list of "phso", "eso", got {obs!r}')
+        out["observers"] = tuple(obs)
+    for key in ("noise_std_um", "duration_s"):
+        if key in t:
+            out[key] = _num(t[key], f"[sweep] {key}", positive=key == "duration_s")
+            if out[key] < 0:
+                raise ConfigError(f"[sweep] {key} must be >= 0, got {t[key]!r}")
+    return out
 
 
 def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") -> StageConfig:
@@ -252,6 +298,8 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
             for k in syn
         }
 
+    sweep = _sweep(data["sweep"]) if "sweep" in data else None
+
     uncertainty = None
     if "uncertainty" in data:
         uncertainty = UncertaintyBox.from_dict(data["uncertainty"])
@@ -270,6 +318,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         if "requirements" in data
         else None,
         uncertainty=uncertainty,
+        sweep=sweep,
         source=source,
         sha256=sha256,
     )

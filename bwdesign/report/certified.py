@@ -40,7 +40,9 @@ from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
+from ..sim.sweep import bounds_from_config
 from .document import Document
+from .sweep import sweep_section
 from .tracking import TrackingRun, input_limits, required_input, tracking_runs
 
 __all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DECAY"]
@@ -380,6 +382,8 @@ def build_report(
     dt, env = _require(config, allow_unbounded=allow_unbounded)
     if config.gains is not None:
         check_gains(params, config.gains)
+    if config.sweep is not None:
+        bounds_from_config(config)  # [sweep] needs a finite [uncertainty] box: say so now
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
 
@@ -674,6 +678,10 @@ def build_report(
         doc.figure("figures/estimation_errors.png", "Estimation error of each state in the loop")
     else:
         doc.para("No run stayed bounded, so there is no estimation-error figure.")
+
+    if config.sweep is not None:
+        say(f"Monte Carlo sweep over [uncertainty]: {config.sweep['samples']} scenarios")
+        cert_doc["sweep"] = sweep_section(doc, config, figs)
 
     # -- firmware ------------------------------------------------------------
     doc.heading("Gains for firmware")

@@ -12,10 +12,17 @@ import numpy as np
 from ..model.params import MODEL_FIELDS
 from ..output.files import DirectoryTarget
 from ..sim.closed_loop import simulate
-from ..sim.sweep import SweepSpec
+from ..sim.start import start_on_reference
+from ..sim.sweep import (
+    SweepSpec,
+    bounds_from_config,
+    draw_scenarios,
+    run_sweep,
+    spec_from_config,
+)
 from .document import Document
 
-__all__ = ["sweep_document", "sweep_summary", "write_sweep"]
+__all__ = ["sweep_document", "sweep_summary", "sweep_section", "write_sweep"]
 
 QUANTILES = (0.5, 0.9, 0.99)
 
@@ -44,6 +51,65 @@ def sweep_summary(table: Mapping[str, np.ndarray]) -> dict[str, Any]:
             )
         out[obs] = doc
     return out
+
+
+def _quantile_table(doc: Document, summary: Mapping[str, Any]) -> None:
+    header = ["observer", "unstable"] + [
+        f"{m.upper()} {q}" for m in ("me", "maxe", "rmse") for q in ("p50", "p90", "p99", "max")
+    ]
+    body = []
+    for obs, s in summary.items():
+        row = [obs.upper(), f"{s['unstable']} ({100 * s['fraction_unstable']:.2f} %)"]
+        for m in ("me", "maxe", "rmse"):
+            row += (
+                ["-"] * 4
+                if s[m] is None
+                else [f"{s[m][k]:.4g}" for k in ("p50", "p90", "p99", "max")]
+            )
+        body.append(row)
+    doc.table(header, body)
+
+
+def sweep_section(doc: Document, config: Any, figs: Path) -> dict[str, Any]:
+    """The certified-gains report's ``[sweep]`` section: a small sweep over ``[uncertainty]``.
+
+    Runs in this process (no Dask); returns the summary for ``certificate.json``.
+    """
+    from ..plotting import figures as plotting
+    from ..plotting.sweep import plot_sweep_histograms
+
+    cfg = config.sweep
+    spec = spec_from_config(
+        config,
+        tuning=cfg.get("tuning", "config"),
+        observers=cfg.get("observers", ("phso", "eso")),
+        noise_std=cfg.get("noise_std_um", 0.0),
+        duration=cfg.get("duration_s"),
+    )
+    bounds = bounds_from_config(config)
+    seed, n = cfg.get("seed", 0), cfg["samples"]
+    dist = cfg.get("distribution", "uniform")
+    scenarios = draw_scenarios(spec.params, bounds, n, seed=seed, distribution=dist)
+    table = run_sweep(spec, scenarios, chunk_size=n, workers=0)
+    summary = sweep_summary(table)
+    lu = spec.params.length_unit
+    doc.heading("Robustness over the uncertainty box (Monte Carlo)")
+    box = ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in bounds.items())
+    doc.para(
+        f"{n} scenarios drawn {dist} from the [uncertainty] box ({box}), seed {seed}; the "
+        f"{cfg.get('tuning', 'config')} tuning, sensor noise {spec.noise_std:g} {lu}, "
+        f"{spec.duration:g} s per scenario, starting "
+        f"{'on the reference' if spec.start == 'reference' else 'from rest'}; metrics over "
+        "the last two "
+        "reference periods. The same sweep, larger: `bwdesign sweep --config "
+        f"{Path(config.source).name} --samples N --seed {seed} --tuning "
+        f"{cfg.get('tuning', 'config')} --noise-std {spec.noise_std:g} --out DIR`."
+    )
+    _quantile_table(doc, summary)
+    fig, _ = plot_sweep_histograms(dict(table), length_unit=lu, title="stable scenarios")
+    plotting.save_figure(fig, figs / "sweep_histograms.png")
+    doc.figure("figures/sweep_histograms.png", f"ME, MAXE and RMSE ({lu}) over the scenarios")
+    return {"samples": n, "seed": seed, "distribution": dist, "bounds": bounds, "summary": summary}
 
 
 def sweep_document(
@@ -79,20 +145,7 @@ def sweep_document(
     ]
     doc.table(["parameter", "nominal", "low", "high"], rows or [["(none)", "", "", ""]])
     doc.heading("Tracking error over the scenarios")
-    header = ["observer", "unstable"] + [
-        f"{m.upper()} {q}" for m in ("me", "maxe", "rmse") for q in ("p50", "p90", "p99", "max")
-    ]
-    body = []
-    for obs, s in summary.items():
-        row = [obs.upper(), f"{s['unstable']} ({100 * s['fraction_unstable']:.2f} %)"]
-        for m in ("me", "maxe", "rmse"):
-            row += (
-                ["-"] * 4
-                if s[m] is None
-                else [f"{s[m][k]:.4g}" for k in ("p50", "p90", "p99", "max")]
-            )
-        body.append(row)
-    doc.table(header, body)
+    _quantile_table(doc, summary)
     figs = out_dir / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     fig, _ = plot_sweep_histograms(dict(table), length_unit=lu, title="stable scenarios")
@@ -122,6 +175,9 @@ def sweep_document(
             noise_std=spec.noise_std,
             seed=int(table["noise_seed"][i]),
             delay=spec.delay,
+            **(
+                start_on_reference(spec.params, spec.reference) if spec.start == "reference" else {}
+            ),
         )
         what = "the first unstable scenario" if unstable.size else "the largest ME"
         drawn = ", ".join(f"{k} = {float(table[k][i]):.6g}" for k in bounds) or "nominal"

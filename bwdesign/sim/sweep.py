@@ -33,6 +33,7 @@ from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from .batch import BATCH_OBSERVERS, simulate_batch
+from .start import start_on_reference
 
 __all__ = [
     "SweepSpec",
@@ -43,6 +44,8 @@ __all__ = [
     "run_sweep",
     "box_bounds",
     "check_box",
+    "spec_from_config",
+    "bounds_from_config",
 ]
 
 DISTRIBUTIONS = ("uniform", "normal")
@@ -74,6 +77,9 @@ class SweepSpec:
         Sensor noise std (length unit).
     delay : bool
         One-sample computation delay.
+    start : {"reference", "rest"}
+        Every scenario starts on the reference (:func:`bwdesign.start_on_reference`,
+        as the report's runs) or from rest.
     """
 
     params: BoucWenParams
@@ -85,8 +91,11 @@ class SweepSpec:
     observers: tuple[str, ...] = ("phso",)
     noise_std: float = 0.0
     delay: bool = False
+    start: str = "reference"
 
     def __post_init__(self) -> None:
+        if self.start not in ("reference", "rest"):
+            raise InputError(f"start must be 'reference' or 'rest', got {self.start!r}")
         bad = [o for o in self.observers if o not in BATCH_OBSERVERS]
         if not self.observers or bad:
             raise InputError(
@@ -212,6 +221,7 @@ def _true_params(params: BoucWenParams, cols: Mapping[str, np.ndarray]) -> list[
 def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Run one chunk of scenarios for every observer of ``spec``: one row per pair."""
     tps = _true_params(spec.params, cols)
+    init = start_on_reference(spec.params, spec.reference) if spec.start == "reference" else {}
     out: dict[str, list[np.ndarray]] = {}
     for obs in spec.observers:
         res = simulate_batch(
@@ -226,6 +236,7 @@ def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.n
             noise_std=spec.noise_std,
             seeds=cols["noise_seed"],
             delay=spec.delay,
+            **init,
         )
         n = len(res)
         part = {k: np.asarray(cols[k]) for k in ("scenario", *MODEL_FIELDS, "noise_seed")}
@@ -380,3 +391,96 @@ def _run_dask(spec, pieces, slices, workers, scheduler, retries, timeout, progre
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def spec_from_config(
+    config: Any,
+    *,
+    tuning: str = "config",
+    form: str = "continuous",
+    observers: Sequence[str] = ("phso", "eso"),
+    noise_std: float = 0.0,
+    duration: float | None = None,
+    delay: bool = False,
+    start: str = "reference",
+) -> SweepSpec:
+    """The sweep of a stage's loop: ``tuning="config"`` runs the ``[observer]`` gains and
+    ``[controller]`` constants (eq. 12 in ``form``), ``"digital"`` the digital tuning
+    (:func:`bwdesign.digital_tuning`); ``[controller]`` limits apply in both. ``duration``
+    defaults to three reference periods, at least 1 s.
+    """
+    from ..control.controllers import make_controller
+    from ..control.tuning import digital_tuning
+    from ..errors import ConfigError
+
+    if tuning not in ("config", "digital"):
+        raise InputError(f"tuning must be 'config' or 'digital', got {tuning!r}")
+    missing = [
+        s for s, v in (("[sampling] dt", config.dt), ("[reference]", config.reference)) if v is None
+    ]
+    if tuning == "config":
+        if config.gains is None:
+            missing.append("[observer] gains (or the digital tuning)")
+        if config.controller is None:
+            missing.append("[controller] (or the digital tuning)")
+    if missing:
+        raise ConfigError(f"{config.source or 'config'}: a sweep needs {', '.join(missing)}")
+    params, dt, ctl = config.plant, config.dt, config.controller
+    limits = None
+    if ctl is not None and (ctl.u_min is not None or ctl.u_max is not None):
+        limits = (
+            -math.inf if ctl.u_min is None else ctl.u_min,
+            math.inf if ctl.u_max is None else ctl.u_max,
+        )
+    if tuning == "digital":
+        tune = digital_tuning(params, dt)
+        gains = tuple(tune.gains)
+        controller = make_controller(
+            params,
+            tune.lambda1,
+            tune.lambda2,
+            form="discrete",
+            dt=dt,
+            integral_rate=tune.integral_rate,
+            u_limits=limits,
+        )
+    else:
+        gains = tuple(config.gains)
+        controller = make_controller(
+            params, ctl.lambda1, ctl.lambda2, form=form, dt=dt, u_limits=limits
+        )
+    period = config.reference.period
+    duration = duration or max(1.0, 3 * period if period else 1.0)
+    return SweepSpec(
+        params=params,
+        reference=config.reference,
+        dt=dt,
+        duration=duration,
+        controller=controller,
+        gains=gains,
+        observers=tuple(observers),
+        noise_std=noise_std,
+        delay=delay,
+        start=start,
+    )
+
+
+def bounds_from_config(config: Any) -> dict[str, tuple[float, float]]:
+    """The box of the stage's ``[uncertainty]`` section (its uncertain parameters only)."""
+    from ..errors import ConfigError
+
+    box = getattr(config, "uncertainty", None)
+    if box is None:
+        raise ConfigError(
+            f"{config.source or 'config'}: no [uncertainty] section to draw the scenarios "
+            "from (bwdesign sweep also takes --uncertainty)"
+        )
+    b = box.bounds(config.plant)
+    open_ = [k for k, (lo, hi) in b.items() if not (math.isfinite(lo) and math.isfinite(hi))]
+    if open_:
+        raise ConfigError(
+            f"{config.source or 'config'}: [uncertainty] leaves {', '.join(open_)} undetermined "
+            "(infinite half-width); a sweep needs a finite box (finite half-widths, or "
+            "bwdesign sweep --uncertainty)"
+        )
+    return check_box(config.plant, {k: v for k, v in b.items() if v[0] != v[1]})
