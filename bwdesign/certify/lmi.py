@@ -46,6 +46,7 @@ __all__ = [
     "lipschitz_margin",
     "sector_margin",
     "sampled_margin",
+    "sampled_delta_margin",
     "least_norm_lyapunov",
     "sector_synthesis",
     "sampled_synthesis",
@@ -337,6 +338,50 @@ def sampled_margin(Ad_lo: np.ndarray, Ad_hi: np.ndarray, *, r: float) -> LMISolu
     return _run(
         prog,
         {"Ad0": np.asarray(Ad_lo, float), "Ad1": np.asarray(Ad_hi, float), "r2": float(r) ** 2},
+    )
+
+
+def _build_sampled_delta() -> _Program:
+    D = [cp.Parameter((3, 3), name=f"D{i}") for i in range(2)]
+    sh = cp.Parameter(nonneg=True, name="sh")
+    c = cp.Parameter(nonneg=True, name="c")
+    P = cp.Variable((3, 3), symmetric=True, name="P")
+    t = cp.Variable(name="t")
+    cons = [P >> t * _I3, P << _I3]
+    for Di in D:
+        PD = P @ Di
+        M = cp.bmat([[PD + PD.T + c * P, sh * PD.T], [sh * PD, -P]])
+        cons.append(_sym(M) << -t * np.eye(6))
+    prob = cp.Problem(cp.Maximize(t), cons)
+    return _Program(prob, {"D0": D[0], "D1": D[1], "sh": sh, "c": c}, {"P": P, "t": t})
+
+
+def sampled_delta_margin(D_lo: np.ndarray, D_hi: np.ndarray, *, h: float, c: float) -> LMISolution:
+    """The sampled LMI in delta form, well conditioned for small sample times.
+
+    With ``A_d = I + h D`` (scaled time), ``A_d' P A_d - r^2 P < 0`` divided by
+    ``h`` is ``He(P D) + c P + h D' P D < 0`` (``c = (1 - r^2)/h``); its Schur
+    complement form ``[[He(P D) + c P, sqrt(h) D' P], [sqrt(h) P D, -P]] <= -t I``
+    is solved at both vertices with ``t I <= P <= I``, maximising ``t``.
+
+    Parameters
+    ----------
+    D_lo, D_hi : ndarray, shape (3, 3)
+        Scaled delta-form matrices at the two ends.
+    h : float
+        Scaled sample time (``sqrt(a1) dt``).
+    c : float
+        Scaled ``(1 - r^2)/dt``.
+    """
+    prog = _program("sampled_delta", _build_sampled_delta)
+    return _run(
+        prog,
+        {
+            "D0": np.asarray(D_lo, float),
+            "D1": np.asarray(D_hi, float),
+            "sh": float(np.sqrt(h)),
+            "c": float(c),
+        },
     )
 
 
