@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report reports paper lint bench
+.PHONY: install test report reports paper lint bench audit
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -41,3 +41,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
 	$(BIN)/python benchmarks/bench_certify.py
+
+# seeded audit of certify/synthesize against an exact mpmath check (results in reports/audit/)
+audit: $(STAMP)
+	$(BIN)/python analysis/certify_audit.py --out reports/audit

@@ -273,6 +273,44 @@ def _verify_lipschitz(
     return _verdict(margins, P, solver, t)
 
 
+def _kyp_candidates(sc: _Scaled, k1: float, k2: float, mu: float) -> list[np.ndarray]:
+    """Lyapunov matrices from the KYP Riccati equation of the sector ``[k1, k2]`` (1/s).
+
+    The S-procedure inequality with multiplier 1,
+    ``He(P A_mu) + (P e3 - s e3)(e3' P - s e3') - k1 k2 e3 e3' < 0`` with
+    ``s = (k1 + k2)/2``, holds with ``-eps I`` on the right for the stabilising
+    solution of the Riccati equation
+    ``A_mu' P + P A_mu - (P B + S)(-1)^-1 (B' P + S') + Q = 0``, ``B = e3``,
+    ``S = -s e3``, ``Q = -k1 k2 e3 e3' + eps I`` (scipy's
+    :func:`~scipy.linalg.solve_continuous_are` with ``R = -1``), which exists when
+    the circle criterion holds. Solved in the scaled coordinates for a few
+    ``eps``; every candidate is re-checked outside by the caller. The same ``P``
+    serves the lipschitz LMI (``k1 = -L``, ``k2 = L``) and, since the inequality
+    then holds for every ``k`` in ``[k1, k2]``, the sector LMI.
+    """
+    from scipy.linalg import solve_continuous_are
+
+    w = sc.w
+    A = sc.Ahat + (mu / w) * np.eye(3)
+    k1h, k2h = k1 / w, k2 / w
+    sh = (k1h + k2h) / 2
+    B = np.array([[0.0], [0.0], [1.0]])
+    out = []
+    for eps in (1e-2, 1e-4, 1e-6, 1e-9):
+        Q = eps * max(1.0, abs(k1h * k2h)) * np.eye(3)
+        Q[2, 2] -= k1h * k2h
+        try:
+            with np.errstate(all="ignore"):
+                X = solve_continuous_are(A, B, Q, -np.ones((1, 1)), s=-sh * B)
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        if not np.all(np.isfinite(X)):
+            continue
+        X = (X + X.T) / 2
+        out.append(w * X / np.outer(sc.s, sc.s))
+    return out
+
+
 def _lipschitz_candidates(P: np.ndarray, L: float) -> list[np.ndarray]:
     """Rescalings ``P / tau`` of a Theorem-1 matrix to try in the lipschitz LMI.
 
@@ -407,3 +445,38 @@ def _verify_sampled(
             )
         )
     return _verdict(tuple(margins), P, solver, t)
+
+
+def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> list[np.ndarray]:
+    """Lyapunov matrices of the sampled tier from the discrete KYP Riccati equation.
+
+    ``k = (1 - rho)/dt`` in ``[k1, k2]`` (1/s); with ``A = A_d(1)/r``,
+    ``b = A_d(1) e3 / r`` and ``kappa = k dt``, the S-procedure inequality
+    ``[[A'PA - P - kappa1 kappa2 e3 e3', A'Pb - s e3], [., b'Pb - 1]] < 0``
+    (``s = (kappa1 + kappa2)/2``) holds for the stabilising solution of
+    :func:`~scipy.linalg.solve_discrete_are` with ``R = -1``, ``S = -s e3`` and
+    ``Q = -kappa1 kappa2 e3 e3' + eps I``, when the discrete circle criterion holds.
+    """
+    from scipy.linalg import solve_discrete_are
+
+    dt = sp.dt
+    r = math.exp(-mu * dt)
+    Ah = _similar(sp.IKC_F, sp.s) / r
+    bh = Ah[:, 2:3].copy()
+    c1, c2 = k1 * dt, k2 * dt
+    sh = (c1 + c2) / 2
+    e3 = np.array([[0.0], [0.0], [1.0]])
+    out = []
+    for eps in (1e-4, 1e-7, 1e-10):
+        Q = eps * np.eye(3)
+        Q[2, 2] -= c1 * c2
+        try:
+            with np.errstate(all="ignore"):
+                X = solve_discrete_are(Ah, bh, Q, -np.ones((1, 1)), s=-sh * e3)
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        if not np.all(np.isfinite(X)):
+            continue
+        X = (X + X.T) / 2
+        out.append(X / np.outer(sp.s, sp.s))
+    return out

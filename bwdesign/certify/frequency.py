@@ -29,6 +29,7 @@ Everything is evaluated in the scaled coordinates of :mod:`.checks` (time in
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -38,8 +39,9 @@ from scipy.optimize import brentq, minimize_scalar
 
 __all__ = ["RankOneFamily", "continuous_family", "sampled_family"]
 
-#: Relative resolution of the envelope and decay searches.
-ENVELOPE_RTOL = 1e-10
+#: Relative resolution of the decay-rate bisection (the envelope itself is refined by
+#: Brent to about 1e-9).
+DECAY_RTOL = 1e-7
 _T = (-8.0, -4.0, -2.0, -1.0, -0.5, -0.25, 0.0, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
 
 
@@ -98,11 +100,35 @@ class RankOneFamily:
         return math.inf if self.dt is None else math.pi / self.dt
 
     def G(self, omega: np.ndarray, mu: float) -> np.ndarray:
-        """``e3' (sigma I - A)^-1 b`` on the contour, in scaled units (``k G = khat Ghat``)."""
+        """``e3' (sigma I - A)^-1 b`` on the contour, in scaled units (``k G = khat Ghat``).
+
+        By the adjugate of the 3x3 matrix ``M = sigma I - Ahat`` (entries of order
+        one in the scaled coordinates): ``e3' adj(M) b / det(M)``.
+        """
         sig = np.atleast_1d(self._sigma(omega, mu))
-        M = sig[:, None, None] * np.eye(3)[None] - self.Ahat[None].astype(complex)
-        rhs = np.broadcast_to(self.bhat.astype(complex), (sig.size, 3))[..., None]
-        return np.linalg.solve(M, rhs)[:, 2, 0]
+        return _resolvent(sig, self.Ahat, self.bhat)
+
+    def G1(self, omega: float, mu: float) -> complex:
+        """:meth:`G` at one frequency, in plain Python (the refinement's inner loop)."""
+        if self.dt is None:
+            sig = complex(-mu, omega) / self.w
+        else:
+            x = complex(-mu * self.dt, omega * self.dt)
+            a, b = x.real, x.imag
+            e = complex(
+                math.expm1(a) * math.cos(b) - 2.0 * math.sin(b / 2.0) ** 2,
+                math.exp(a) * math.sin(b),
+            )
+            sig = e / (self.dt * self.w)
+        return _resolvent_scalar(sig, self._rows, self._b)
+
+    @functools.cached_property
+    def _rows(self) -> tuple[tuple[float, ...], ...]:
+        return tuple(tuple(float(x) for x in row) for row in self.Ahat)
+
+    @functools.cached_property
+    def _b(self) -> tuple[float, ...]:
+        return tuple(float(x) for x in self.bhat)
 
     def grid(self, mu: float) -> np.ndarray:
         """Frequencies (rad/s): log grid plus points around every pole."""
@@ -177,7 +203,11 @@ class RankOneFamily:
 
         om = self.grid(mu)
         vals = wfun(self.G(om, mu))
-        return self._refine(lambda x: float(wfun(self.G(np.array([x]), mu))[0]), om, vals)
+
+        def w1(x: float) -> float:
+            return float(wfun(np.array([self.G1(x, mu)]))[0])
+
+        return self._refine(w1, om, vals)
 
     def min_q(self, k1: float, k2: float, mu: float) -> float:
         """``min_omega q(omega)`` for the interval ``[k1, k2]`` (1/s)."""
@@ -188,7 +218,12 @@ class RankOneFamily:
 
         om = self.grid(mu)
         vals = -q(self.G(om, mu))
-        return -self._refine(lambda x: float(-q(self.G(np.array([x]), mu))[0]), om, vals)
+
+        def negq(x: float) -> float:
+            G = self.G1(x, mu)
+            return -(1.0 + (k1h + k2h) * G.real + k1h * k2h * (G.real**2 + G.imag**2))
+
+        return -self._refine(negq, om, vals)
 
     def envelope_by_bisection(
         self, kfun: Callable[[float], tuple[float, float]], mu: float, v_max: float
@@ -221,7 +256,7 @@ class RankOneFamily:
         vstar = np.where(ok_top, math.inf, np.exp(hi))
 
         def inv_vstar_at(x: float) -> float:
-            Gx = self.G(np.array([x]), mu)
+            Gx = np.array([self.G1(x, mu)])
 
             def f(lv: float) -> float:
                 return float(qv(Gx, np.array([math.exp(lv)]))[0])
@@ -247,13 +282,34 @@ class RankOneFamily:
         if not math.isfinite(cap):
             cap = 50.0 / (self.dt or 1.0)
         lo, hi = 0.0, cap
-        while hi - lo > ENVELOPE_RTOL * hi:
+        while hi - lo > DECAY_RTOL * hi:
             mid = (lo + hi) / 2.0
             if feasible(mid):
                 lo = mid
             else:
                 hi = mid
         return lo
+
+
+def _resolvent(sig: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    m00, m01, m02 = sig - A[0, 0], -A[0, 1], -A[0, 2]
+    m10, m11, m12 = -A[1, 0], sig - A[1, 1], -A[1, 2]
+    m20, m21, m22 = -A[2, 0], -A[2, 1], sig - A[2, 2]
+    c0 = m10 * m21 - m11 * m20
+    c1 = m01 * m20 - m00 * m21
+    c2 = m00 * m11 - m01 * m10
+    det = m00 * (m11 * m22 - m12 * m21) - m01 * (m10 * m22 - m12 * m20) + m02 * c0
+    return (c0 * b[0] + c1 * b[1] + c2 * b[2]) / det
+
+
+def _resolvent_scalar(sig: complex, A: tuple, b: tuple) -> complex:
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = A
+    m00, m11, m22 = sig - a00, sig - a11, sig - a22
+    c0 = a10 * a21 - m11 * -a20
+    c1 = a01 * a20 - m00 * -a21
+    c2 = m00 * m11 - a01 * a10
+    det = m00 * (m11 * m22 - a12 * a21) + a01 * (-a10 * m22 - a12 * a20) - a02 * c0
+    return (c0 * b[0] + c1 * b[1] + c2 * b[2]) / det
 
 
 def continuous_family(Ahat: np.ndarray, w: float) -> RankOneFamily:

@@ -64,6 +64,8 @@ from .checks import (
     _check_sampled,
     _check_sector,
     _cont_err,
+    _dare_candidates,
+    _kyp_candidates,
     _lipschitz_candidates,
     _lipschitz_coefficient,
     _posdef,
@@ -72,6 +74,7 @@ from .checks import (
     _scale_continuous,
     _Scaled,
     _verify_lipschitz,
+    _verify_sampled,
     _verify_sector,
     rho_exponents,
     rho_interval,
@@ -182,10 +185,21 @@ def _exact_tier(
     solved only when the exact criterion says a certificate exists.
     """
     exact_ok = udot_max < envelope
-    main: _Check | None = check() if exact_ok else None
-    source = "lmi"
+    main: _Check | None = None
+    source = ""
+    # the Riccati (KYP) matrices first: no solver, and exact up to round-off
+    for label, cand in candidates:
+        if label == "kyp" and exact_ok:
+            c = cand()
+            if c.ok:
+                main, source = c, label
+                break
+    if main is None and exact_ok:
+        main, source = check(), "lmi"
     if main is None or not main.ok:
         for label, cand in candidates:
+            if label == "kyp":
+                continue
             c = cand()
             if c.ok:
                 main, source = c, label
@@ -195,7 +209,10 @@ def _exact_tier(
     if main is not None and main.t is not None:
         details["lmi_margin"] = main.t
     if holds:
-        status = "certified" if source == "lmi" else f"certified (P of the {source} tier)"
+        status = {
+            "lmi": "certified",
+            "kyp": "certified (P from the KYP Riccati equation)",
+        }.get(source, f"certified (P of the {source} tier)")
         rate = max(decay, decay_rate())
     else:
         rate = None
@@ -378,6 +395,8 @@ def _lipschitz(
     c = _lipschitz_coefficient(params)
     L = c * udot_max
     cands = []
+    for P in _kyp_candidates(sc, -L, L, decay) if udot_max < math.inf else ():
+        cands.append(("kyp", lambda P=P: _verify_lipschitz(sc, L, decay, P, "scipy", None)))
     th = prev.get("theorem1")
     if th is not None and th.holds:
         for P in _lipschitz_candidates(np.asarray(th.P), L):
@@ -404,6 +423,8 @@ def _sector(
     k_lo, k_hi = sector_interval(params, udot_max)
     g = abs(params.gamma)
     cands = []
+    for P in _kyp_candidates(sc, k_lo, k_hi, decay):
+        cands.append(("kyp", lambda P=P: _verify_sector(sc, k_lo, k_hi, decay, P, "scipy", None)))
     for name in ("lipschitz", "theorem1"):
         cert = prev.get(name)
         if cert is not None and cert.holds:
@@ -457,7 +478,12 @@ def _sampled(
         decay=decay,
         envelope=env,
         check=lambda: _check_sampled(sp, x_lo, x_hi, decay),
-        candidates=(),
+        candidates=[
+            ("kyp", lambda P=P: _verify_sampled(sp, x_lo, x_hi, decay, P, "scipy", None))
+            for P in _dare_candidates(sp, *kfun(udot_max), decay)
+        ]
+        if udot_max < env
+        else (),
         decay_rate=lambda: fam.largest_decay(lambda m: feasible(udot_max, m)),
         details={
             "dt": dt,
