@@ -226,4 +226,21 @@ def test_cli_synthesize_small_radius_is_a_well_formed_no(capsys):
     code = main(argv + ["--dt", "2e-4", "--pole-radius", "1"])
     out = capsys.readouterr().out
     assert code == 1
-    assert "feasible: no" in out and "max |z - 1|" in out
+    assert "feasible: no (pole_radius)" in out and "1.562 rad/s" in out
+
+
+def test_design_outside_the_disk_is_rejected_with_the_measured_value():
+    """Issue 19's gains for --pole-radius 1: continuous poles -731.6, -0.727 +- 0.998j."""
+    from bwdesign.certify.synthesis import _Attempt, _finish, _Searched
+
+    p = preset("paper_experiment")
+    gains = (19.279, -172524.0, -0.00697595)
+    res = _finish(
+        p, _Attempt(True, _Searched(), None), gains, None, "sampled", 361.0, 0.0, 1.0, DT, False
+    )
+    assert not res.feasible and not res.pole_check.passed
+    assert "max |z - 1| of the discrete poles is 0.13" in res.reason
+    res = _finish(
+        p, _Attempt(True, _Searched(), None), gains, None, "sector", 361.0, 0.0, 1.0, None, False
+    )
+    assert not res.feasible and "max |pole| of A0 - l C (rad/s) is 731" in res.reason

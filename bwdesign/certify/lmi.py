@@ -17,7 +17,9 @@ Conventions
   Theorem 1, and the synthesis refinement, which keeps half the best margin
   and minimises the gains so that the design is unique.)
 - Homogeneous programs are normalised by ``P <= I``.
-- Solvers: Clarabel first, SCS as fall-back. Only ``OPTIMAL`` is accepted;
+- Solvers: Clarabel first, SCS as fall-back (the synthesis programs use
+  Clarabel only: :mod:`.synthesis` falls back on an exact pole search, which is
+  faster and more reliable than SCS on those programs). Only ``OPTIMAL`` is accepted;
   ``OPTIMAL_INACCURATE`` is reported as unverified. Solver exceptions are caught
   and turned into a status string; they never escape as a traceback.
 - The programs are built once per thread with cvxpy parameters (DPP), so a
@@ -150,7 +152,9 @@ def solver_versions() -> dict[str, str]:
     return out
 
 
-def solve(problem: cp.Problem, variables: Mapping[str, cp.Variable]) -> LMISolution:
+def solve(
+    problem: cp.Problem, variables: Mapping[str, cp.Variable], *, first_only: bool = False
+) -> LMISolution:
     """Solve with Clarabel, fall back to SCS, accept only ``OPTIMAL``.
 
     Parameters
@@ -158,6 +162,9 @@ def solve(problem: cp.Problem, variables: Mapping[str, cp.Variable]) -> LMISolut
     problem : cvxpy.Problem
     variables : mapping of str to cvxpy.Variable
         Variables whose values are returned.
+    first_only : bool
+        Try only the first solver (synthesis: its exact pole search is a better
+        fall-back than a slow SCS run on an ill-conditioned program).
 
     Returns
     -------
@@ -167,7 +174,7 @@ def solve(problem: cp.Problem, variables: Mapping[str, cp.Variable]) -> LMISolut
     attempts: list[str] = []
     last_status = "solver_error"
     last_solver = ""
-    for solver in SOLVERS:
+    for solver in SOLVERS[:1] if first_only else SOLVERS:
         try:
             with warnings.catch_warnings(), _quiet_c_output(solver in _NOISY):
                 warnings.simplefilter("ignore")
@@ -245,10 +252,10 @@ def _sym(X: cp.Expression) -> cp.Expression:
     return (X + X.T) / 2
 
 
-def _run(prog: _Program, values: Mapping[str, Any]) -> LMISolution:
+def _run(prog: _Program, values: Mapping[str, Any], *, first_only: bool = False) -> LMISolution:
     for name, value in values.items():
         prog.params[name].value = value
-    return solve(prog.problem, prog.variables)
+    return solve(prog.problem, prog.variables, first_only=first_only)
 
 
 def _build_lipschitz() -> _Program:
@@ -505,7 +512,7 @@ def sector_synthesis(
         values["R"] = float(radius)
     if refine:
         values["t_min"] = float(t_min)
-    return _run(prog, values)
+    return _run(prog, values, first_only=True)
 
 
 def _build_sampled_synthesis(with_disk: bool, refine: bool = False) -> Callable[[], _Program]:
@@ -577,4 +584,4 @@ def sampled_synthesis(
         values.update({"F": F, "H": H, "c": float(disk[0]), "rho": float(disk[1])})
     if refine:
         values["t_min"] = float(t_min)
-    return _run(prog, values)
+    return _run(prog, values, first_only=True)

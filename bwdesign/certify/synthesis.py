@@ -66,7 +66,20 @@ def synthesize(
     smallest ``||Y||^2 + 0.01 ||P||_F^2`` with margin ``t*/2``: the least
     aggressive gains that keep half the best margin, a unique and reproducible
     design. Either way the result is re-certified by :func:`certify` before it
-    is called feasible.
+    is called feasible, and the pole region is measured on the returned gains
+    outside the solver (``pole_check``: ``max |lambda|`` against ``pole_radius``
+    in continuous time, ``max |z - 1|`` against ``1 - exp(-pole_radius dt)`` with
+    ``dt``); a design that leaves the region is not feasible.
+
+    When the LMI design is infeasible or rejected, a fixed set of pole patterns
+    (magnitudes ``sqrt(a1) 2^(k/2)``, four shapes) inside the region is searched
+    with the exact frequency-domain criterion, and the best ones are certified.
+    Monotonicity in the radius: the pattern set of a larger radius contains that
+    of a smaller one, so an answer found by the search stays feasible for every
+    larger radius; an answer found only by the LMI (whose solution depends on
+    the radius) is not guaranteed to be found again for a larger one, but the
+    search then still runs. A "no" names the binding requirement with the
+    numbers the exact criterion gives over the searched patterns.
 
     Parameters
     ----------
@@ -313,13 +326,18 @@ def _diagnose(
         report=None,
         params=params,
     )
-    if not first.sol.ok and not isinstance(first.sol, _NoSolve):
+    cands = _candidates(params, dt)
+    inside = [c for c in cands if c.radius < R * (1 - 1e-12)]
+    if any(_exact_score(params, c.gains, udot_max, decay, dt) > 0 for c in inside):
+        # gains exist by the exact criterion, but none passed re-certification
+        solved = first.sol.ok or isinstance(first.sol, _NoSolve)
         return SynthesisResult(
-            binding="solver",
+            binding="verification" if solved else "solver",
             reason=(
-                f"the {tier} synthesis LMI was not solved ({'; '.join(first.sol.attempts)}) and "
-                "the exact pole search found no gains that pass re-certification; no gains "
-                "are certified"
+                f"the exact criterion admits gains within pole radius {R:g} rad/s at "
+                f"|u'| <= {udot_max:g} V/s, but none passed re-certification (the {tier} "
+                f"synthesis LMI: {'; '.join(first.sol.attempts) or first.sol.status}); no "
+                "gains are certified"
             ),
             max_decay=None,
             max_udot=None,
@@ -331,8 +349,6 @@ def _diagnose(
         lmi_note = f"; the LMI design was rejected: {rejected}"
     else:
         lmi_note = f"; the synthesis LMI has no strictly feasible point (t = {first.t:.3g})"
-    cands = _candidates(params, dt)
-    inside = [c for c in cands if c.radius < R * (1 - 1e-12)]
     where = (
         f"within pole radius {R:g} rad/s at |u'| <= {udot_max:g} V/s ({tier} tier; "
         f"{len(inside)} pole patterns searched)"

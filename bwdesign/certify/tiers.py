@@ -38,11 +38,31 @@ for ``|u'| <= v`` (``v = udot_max``, V/s). The tiers, weakest first:
     own :func:`bwdesign.observers.discrete_gains`, so the tier certifies exactly
     the gain the sampled :class:`~bwdesign.HysteresisObserver` runs.
 
-Numerics: every LMI is solved in scaled coordinates (``x2`` scaled by
+Envelopes and decay rates (``lipschitz``, ``sector``, ``sampled``) are exact:
+each tier's perturbation is rank one, so a common quadratic Lyapunov function
+exists exactly when the circle criterion holds (lossless S-procedure, KYP),
+and :mod:`.frequency` evaluates that condition (continuous, or discrete in
+delta form) on a pole-adapted frequency grid refined by Brent. ``max_udot`` is
+the envelope at the requested decay; ``decay_rate`` the largest decay at
+``udot_max`` (``None`` when the tier does not hold). There is no search limit
+(``max_udot_capped`` is always False; ``inf`` means every rate).
+
+The verdict ``holds`` needs a Lyapunov matrix at ``udot_max`` and the requested
+decay that passed the outside check: first the stabilising solution of the
+tier's KYP Riccati equation (no solver), then the LMI (Clarabel, SCS), then the
+matrix of a weaker tier (``theorem1``'s ``P`` rescaled is a lipschitz
+certificate, the lipschitz ``P`` a sector one), so among the continuous tiers a
+stronger tier never certifies less than a weaker one. ``sampled`` is a
+different (discrete) system and is not ordered against them.
+
+Numerics: everything is solved in scaled coordinates (``x2`` scaled by
 ``w0 = sqrt(a1)``, time by ``w0``, then diagonal balancing), because ``a1``
-spans 1e3..1e9. The solver's matrices are mapped back, and a tier says
-``holds: true`` only after ``P > 0`` and every LMI block has been re-checked in
-the original coordinates with ``numpy.linalg.eigvalsh`` (see :class:`Margin`).
+spans 1e3..1e9; the sampled tier in delta form ``(A_d - I)/dt``, formed without
+cancellation, so it stays well conditioned as ``dt -> 0``. The matrices are
+mapped back, and a tier says ``holds: true`` only after ``P > 0`` and every LMI
+block has been re-checked in the original coordinates with
+``numpy.linalg.eigvalsh`` (see :class:`Margin`); the sampled blocks are checked
+divided by ``dt`` (delta form).
 """
 
 from __future__ import annotations
