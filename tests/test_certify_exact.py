@@ -95,6 +95,23 @@ def test_pole_matching_for_every_lambda_dt(a1, lam_dt):
     np.testing.assert_allclose(K, _exact_K(p, gains, dt), rtol=1e-9)
 
 
+@pytest.mark.parametrize("lam_dt", [2.0, 20.0, 200.0])
+def test_pole_matching_far_from_one_uses_the_z_form(lam_dt):
+    """No pole near z = 1: K still matches the 80-digit Ackermann gain."""
+    p = BoucWenParams(a1=1e8, a2=2e3, a3=1e8, alpha=1.0, beta=1.0, gamma=0.3)
+    w0 = 1e4
+    lam = np.array([-w0, -w0 * (0.5 + 0.8j), -w0 * (0.5 - 0.8j)])
+    c = np.real(np.poly(lam))
+    l1 = c[1] - p.a2
+    gains = (l1, c[2] - p.a1 - l1 * p.a2, -c[3] / p.a1)
+    dt = lam_dt / float(np.min(np.abs(lam)))
+    Kx = _exact_K(p, gains, dt)
+    # near deadbeat K2 is 1e-5 of the others: compare normwise there
+    np.testing.assert_allclose(
+        discrete_gains(p, gains, dt), Kx, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(Kx)))
+    )
+
+
 def test_issue_reproducer_pole_matching():
     K = discrete_gains(REPRO, REPRO_GAINS, REPRO_DT)
     margin, z = schur_margin(REPRO, K, REPRO_DT)

@@ -139,7 +139,9 @@ def discrete_gains(params: BoucWenParams, gains: Any, dt: float) -> np.ndarray:
     ``(x1, x2/sqrt(a1), x3)`` and time in units of ``1/sqrt(a1)``. In that form
     the matrices are of order one for every ``|lambda| dt``; Ackermann's
     formula on ``F`` itself (which tends to ``I`` as ``dt -> 0``) cancels
-    catastrophically when ``|lambda| dt`` is small.
+    catastrophically when ``|lambda| dt`` is small. When no pole is near
+    ``z = 1`` (every ``|z_i - 1| > 0.5``) the z form is used instead, which keeps
+    poles close to ``z = 0`` that the delta form would round to ``-1/dt``.
 
     Parameters
     ----------
@@ -158,7 +160,35 @@ def discrete_gains(params: BoucWenParams, gains: Any, dt: float) -> np.ndarray:
     T = np.array([1.0, w0, 1.0])
     A = error_matrix(params, gains)
     lam = np.linalg.eigvals(A * T[None, :] / T[:, None] / w0) * w0
-    return _place_delta(params, _expm1_complex(lam * dt) / dt, dt)
+    zm1 = _expm1_complex(lam * dt)
+    if float(np.min(np.abs(zm1))) > Z_FORM_BELOW:
+        # no pole near z = 1: F is far from I and the z form keeps the small |z_i|
+        # (which the delta form would round to -1/dt)
+        return _place_z(params, np.exp(lam * dt), dt)
+    return _place_delta(params, zm1 / dt, dt)
+
+
+#: Poles are placed in the z form when every ``|z_i - 1|`` exceeds this (else delta form).
+Z_FORM_BELOW = 0.5
+
+
+def _place_z(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.ndarray:
+    """Ackermann's formula for ``(F, C F)`` in the coordinates ``(x1, x2/sqrt(a1), x3)``."""
+    F = discretize(params, dt).F
+    w0 = math.sqrt(params.a1)
+    s = np.array([1.0, 1.0 / w0, 1.0])  # z = S x
+    Fz = s[:, None] * F / s[None, :]
+    Hz = (C @ F) / s
+    O = np.vstack([Hz, Hz @ Fz, Hz @ Fz @ Fz])
+    coeffs = np.real(np.poly(poles))
+    pF = coeffs[0] * Fz @ Fz @ Fz + coeffs[1] * Fz @ Fz + coeffs[2] * Fz + coeffs[3] * np.eye(3)
+    try:
+        Kz = pF @ np.linalg.solve(O, np.array([0.0, 0.0, 1.0]))
+    except np.linalg.LinAlgError:
+        raise GainError(
+            f"the sampled model is not observable at dt = {dt:g} s; choose another dt"
+        ) from None
+    return Kz / s
 
 
 def place_discrete(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.ndarray:
