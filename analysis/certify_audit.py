@@ -741,7 +741,8 @@ def main(argv: list[str] | None = None) -> int:
     summary = summarise(cases, synth)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "certify_audit.json").write_text(
-        json.dumps({"summary": summary, "cases": cases, "synthesis": synth}, indent=1) + "\n"
+        json.dumps({"summary": summary, "cases": cases, "synthesis": synth}, separators=(",", ":"))
+        + "\n"
     )
     (args.out / "certify_audit.md").write_text(markdown(summary, args, cases))
     print(markdown(summary, args, cases))
