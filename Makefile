@@ -44,4 +44,4 @@ bench: $(STAMP)
 
 # seeded audit of certify/synthesize against an exact mpmath check (results in reports/audit/)
 audit: $(STAMP)
-	$(BIN)/python analysis/certify_audit.py --out reports/audit
+	$(BIN)/python analysis/certify_audit.py --workers 2 --out reports/audit
