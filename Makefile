@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report reports paper lint bench dist identify
+.PHONY: install test report reports paper lint bench dist identify audit
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -61,3 +61,7 @@ dist: $(STAMP)
 	rm -rf dist
 	$(BIN)/python -m build --outdir dist .
 	$(BIN)/twine check --strict dist/*
+
+# seeded audit of certify/synthesize against an exact mpmath check (results in reports/audit/)
+audit: $(STAMP)
+	$(BIN)/python analysis/certify_audit.py --workers 2 --out reports/audit

@@ -13,8 +13,8 @@ from scipy.linalg import logm, matrix_balance
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams
 from ..model.plant import _check_dt, discretize
-from ..observers.gains import _as_gains, discrete_gains
-from .results import _C, _U, REL_MARGIN, Margin, _frozen
+from ..observers.gains import _as_gains, delta_transition, discrete_gains
+from .results import _U, REL_MARGIN, Margin, _frozen
 
 __all__ = ["continuous_equivalent", "sector_interval", "rho_interval"]
 
@@ -44,6 +44,13 @@ def sector_interval(params: BoucWenParams, udot_max: float) -> tuple[float, floa
     """
     g = abs(params.gamma)
     return (min(0.0, (params.beta - g) * udot_max), max(0.0, (params.beta + g) * udot_max))
+
+
+def rho_exponents(params: BoucWenParams, udot_max: float, dt: float) -> tuple[float, float]:
+    """``(ln rho_lo, ln rho_hi)`` of :func:`rho_interval`, without rounding ``rho`` first."""
+    g = abs(params.gamma)
+    w = udot_max * dt
+    return min(0.0, -(params.beta + g) * w), max(0.0, -(params.beta - g) * w)
 
 
 def rho_interval(params: BoucWenParams, udot_max: float, dt: float) -> tuple[float, float]:
@@ -242,6 +249,13 @@ def _check_lipschitz(sc: _Scaled, L: float, mu: float) -> _Check:
     Ph = np.asarray(sol["P"])
     Ph = (Ph + Ph.T) / 2
     P = sc.w * Ph / np.outer(sc.s, sc.s)  # S^-T Phat S^-1, times w (s3 = 1)
+    return _verify_lipschitz(sc, L, mu, P, sol.solver, float(sol["t"]))
+
+
+def _verify_lipschitz(
+    sc: _Scaled, L: float, mu: float, P: np.ndarray, solver: str, t: float | None
+) -> _Check:
+    """Outside check of the lipschitz LMI for a given ``P`` (original coordinates)."""
     A = sc.A
     top = A.T @ P + P @ A + 2 * mu * P
     top[2, 2] += L * L
@@ -256,7 +270,58 @@ def _check_lipschitz(sc: _Scaled, L: float, mu: float) -> _Check:
         _posdef("P > 0", P),
         _negdef("[[A'P + PA + 2 mu P + L^2 e3 e3', P e3], [e3'P, -1]] < 0", M, err),
     )
-    return _verdict(margins, P, sol.solver, float(sol["t"]))
+    return _verdict(margins, P, solver, t)
+
+
+def _kyp_candidates(sc: _Scaled, k1: float, k2: float, mu: float) -> list[np.ndarray]:
+    """Lyapunov matrices from the KYP Riccati equation of the sector ``[k1, k2]`` (1/s).
+
+    The S-procedure inequality with multiplier 1,
+    ``He(P A_mu) + (P e3 - s e3)(e3' P - s e3') - k1 k2 e3 e3' < 0`` with
+    ``s = (k1 + k2)/2``, holds with ``-eps I`` on the right for the stabilising
+    solution of the Riccati equation
+    ``A_mu' P + P A_mu - (P B + S)(-1)^-1 (B' P + S') + Q = 0``, ``B = e3``,
+    ``S = -s e3``, ``Q = -k1 k2 e3 e3' + eps I`` (scipy's
+    :func:`~scipy.linalg.solve_continuous_are` with ``R = -1``), which exists when
+    the circle criterion holds. Solved in the scaled coordinates for a few
+    ``eps``; every candidate is re-checked outside by the caller. The same ``P``
+    serves the lipschitz LMI (``k1 = -L``, ``k2 = L``) and, since the inequality
+    then holds for every ``k`` in ``[k1, k2]``, the sector LMI.
+    """
+    from scipy.linalg import solve_continuous_are
+
+    w = sc.w
+    A = sc.Ahat + (mu / w) * np.eye(3)
+    k1h, k2h = k1 / w, k2 / w
+    sh = (k1h + k2h) / 2
+    B = np.array([[0.0], [0.0], [1.0]])
+    out = []
+    for eps in (1e-2, 1e-4, 1e-6, 1e-9):
+        Q = eps * max(1.0, abs(k1h * k2h)) * np.eye(3)
+        Q[2, 2] -= k1h * k2h
+        try:
+            with np.errstate(all="ignore"):
+                X = solve_continuous_are(A, B, Q, -np.ones((1, 1)), s=-sh * B)
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        if not np.all(np.isfinite(X)):
+            continue
+        X = (X + X.T) / 2
+        out.append(w * X / np.outer(sc.s, sc.s))
+    return out
+
+
+def _lipschitz_candidates(P: np.ndarray, L: float) -> list[np.ndarray]:
+    """Rescalings ``P / tau`` of a Theorem-1 matrix to try in the lipschitz LMI.
+
+    If ``A'P + PA <= -q I`` and ``2 L ||P|| + 2 mu ||P|| < q``, the S-procedure
+    multiplier ``tau = ||P|| / L`` makes the lipschitz LMI hold for ``P / tau``.
+    """
+    nP = float(np.linalg.eigvalsh((P + P.T) / 2).max())
+    if not (L > 0 and nP > 0):
+        return []
+    tau = nP / L
+    return [P / (tau * f) for f in (1.0, 2.0, 0.5, 4.0, 0.25)]
 
 
 def _check_sector(sc: _Scaled, k_lo: float, k_hi: float, mu: float) -> _Check:
@@ -269,6 +334,13 @@ def _check_sector(sc: _Scaled, k_lo: float, k_hi: float, mu: float) -> _Check:
     Ph = np.asarray(sol["P"])
     Ph = (Ph + Ph.T) / 2
     P = Ph / np.outer(sc.s, sc.s)
+    return _verify_sector(sc, k_lo, k_hi, mu, P, sol.solver, float(sol["t"]))
+
+
+def _verify_sector(
+    sc: _Scaled, k_lo: float, k_hi: float, mu: float, P: np.ndarray, solver: str, t: float | None
+) -> _Check:
+    """Outside check of the sector LMI at both ends for a given ``P``."""
     margins = [_posdef("P > 0", P)]
     for k in (k_lo, k_hi):
         Ak = sc.A.copy()
@@ -277,51 +349,134 @@ def _check_sector(sc: _Scaled, k_lo: float, k_hi: float, mu: float) -> _Check:
         margins.append(
             _negdef(f"He(P (A - k e3 e3' + mu I)) < 0 at k = {k:.6g} 1/s", M, _cont_err(Ak, P, mu))
         )
-    return _verdict(tuple(margins), P, sol.solver, float(sol["t"]))
+    return _verdict(tuple(margins), P, solver, t)
 
 
 @dataclass(frozen=True)
 class _Sampled:
+    """The sampled error dynamics ``(I - K C) F diag(1, 1, rho)`` in delta form.
+
+    ``A_delta(rho) = Ad1 + ((rho - 1)/dt) b e3'`` with ``Ad1 = ((I - K C) F - I)/dt``
+    and ``b = (I - K C) F e3``, all formed without subtracting ``I`` from a
+    matrix close to ``I`` (:func:`bwdesign.observers.gains.delta_transition`).
+    """
+
     F: np.ndarray  # expm(A0 dt) with the x3 row [0, 0, 1]
     K: np.ndarray
     IKC_F: np.ndarray  # (I - K C) F
+    Ad1: np.ndarray  # ((I - K C) F - I)/dt (1/s)
+    b: np.ndarray  # (I - K C) F e3
     s: np.ndarray
+    w: float
     dt: float
+
+    def delta(self, x: float) -> np.ndarray:
+        """``A_delta(rho)`` (1/s) at ``rho = exp(x)`` (``(rho - 1)/dt = expm1(x)/dt``, exact)."""
+        return self.Ad1 + (math.expm1(x) / self.dt) * np.outer(self.b, _E3)
+
+
+_E3 = np.array([0.0, 0.0, 1.0])
 
 
 def _prepare_sampled(params: BoucWenParams, K: np.ndarray, dt: float) -> _Sampled:
-    F = np.array(discretize(params, dt).F)
+    F, Fd = delta_transition(params, dt)
+    K = np.asarray(K, dtype=float)
     Ad = F - np.outer(K, F[0])
+    Ad1 = Fd - np.outer(K / dt, F[0])
+    b = _E3 + dt * Ad1[:, 2]
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])
-    d = _balance(_similar(Ad, T))
-    return _Sampled(F=F, K=K, IKC_F=Ad, s=T * d, dt=dt)
+    d = _balance(_similar(Ad1, T) / w)
+    return _Sampled(F=F, K=K, IKC_F=Ad, Ad1=Ad1, b=b, s=T * d, w=w, dt=dt)
 
 
-def _check_sampled(sp: _Sampled, rho_lo: float, rho_hi: float, r: float) -> _Check:
+def _check_sampled(sp: _Sampled, x_lo: float, x_hi: float, mu: float) -> _Check:
+    """The sampled LMI ``A_d' P A_d < r^2 P`` at both rho ends, solved and checked in delta form.
+
+    Divided by ``dt`` it reads ``He(P A_delta) + dt A_delta' P A_delta + c P < 0``
+    with ``c = (1 - r^2)/dt``, which stays well conditioned as ``dt -> 0``. The
+    rho ends are given by their logarithms ``x = ln(rho)``.
+    """
     from . import lmi
 
-    if not math.isfinite(rho_hi):
+    if not x_hi < 700.0:
         return _Check(
             False, None, (), "", "not certified: the rho interval is unbounded at this rate"
         )
-    verts = []
-    for rho in (rho_lo, rho_hi):
-        Ad = sp.IKC_F.copy()
-        Ad[:, 2] *= rho
-        verts.append(Ad)
-    sol = lmi.sampled_margin(_similar(verts[0], sp.s), _similar(verts[1], sp.s), r=r)
+    dt, w = sp.dt, sp.w
+    c = -math.expm1(-2.0 * mu * dt) / dt
+    verts = [sp.delta(x) for x in (x_lo, x_hi)]
+    sol = lmi.sampled_delta_margin(
+        _similar(verts[0], sp.s) / w, _similar(verts[1], sp.s) / w, h=w * dt, c=c / w
+    )
     bad = _from_solution(sol, "sampled")
     if bad is not None:
         return bad
     Ph = np.asarray(sol["P"])
     Ph = (Ph + Ph.T) / 2
     P = Ph / np.outer(sp.s, sp.s)
+    return _verify_sampled(sp, x_lo, x_hi, mu, P, sol.solver, float(sol["t"]))
+
+
+def _verify_sampled(
+    sp: _Sampled,
+    x_lo: float,
+    x_hi: float,
+    mu: float,
+    P: np.ndarray,
+    solver: str,
+    t: float | None,
+) -> _Check:
+    """Outside check of the delta-form sampled LMI at both rho ends for a given ``P``."""
+    dt = sp.dt
+    c = -math.expm1(-2.0 * mu * dt) / dt
     margins = [_posdef("P > 0", P)]
-    aIKC = np.abs(np.eye(3) - np.outer(sp.K, _C)) @ np.abs(sp.F)
-    for rho, Ad in zip((rho_lo, rho_hi), verts, strict=True):
-        M = Ad.T @ P @ Ad - r * r * P
-        aA = aIKC * np.array([1.0, 1.0, abs(rho)])[None, :]
-        err = 32 * _U * (aA.T @ np.abs(P) @ aA + r * r * np.abs(P))
-        margins.append(_negdef(f"A_d' P A_d - r^2 P < 0 at rho = {rho:.6g}", M, err))
-    return _verdict(tuple(margins), P, sol.solver, float(sol["t"]))
+    aP = np.abs(P)
+    for x in (x_lo, x_hi):
+        D = sp.delta(x)
+        M = D.T @ P + P @ D + dt * (D.T @ P @ D) + c * P
+        aD = np.abs(D)
+        err = 32 * _U * (aD.T @ aP + aP @ aD + dt * (aD.T @ aP @ aD) + c * aP)
+        margins.append(
+            _negdef(
+                f"(A_d' P A_d - r^2 P)/dt < 0 at rho = {math.exp(x):.6g} (delta form)",
+                M,
+                err,
+            )
+        )
+    return _verdict(tuple(margins), P, solver, t)
+
+
+def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> list[np.ndarray]:
+    """Lyapunov matrices of the sampled tier from the discrete KYP Riccati equation.
+
+    ``k = (1 - rho)/dt`` in ``[k1, k2]`` (1/s); with ``A = A_d(1)/r``,
+    ``b = A_d(1) e3 / r`` and ``kappa = k dt``, the S-procedure inequality
+    ``[[A'PA - P - kappa1 kappa2 e3 e3', A'Pb - s e3], [., b'Pb - 1]] < 0``
+    (``s = (kappa1 + kappa2)/2``) holds for the stabilising solution of
+    :func:`~scipy.linalg.solve_discrete_are` with ``R = -1``, ``S = -s e3`` and
+    ``Q = -kappa1 kappa2 e3 e3' + eps I``, when the discrete circle criterion holds.
+    """
+    from scipy.linalg import solve_discrete_are
+
+    dt = sp.dt
+    r = math.exp(-mu * dt)
+    Ah = _similar(sp.IKC_F, sp.s) / r
+    bh = Ah[:, 2:3].copy()
+    c1, c2 = k1 * dt, k2 * dt
+    sh = (c1 + c2) / 2
+    e3 = np.array([[0.0], [0.0], [1.0]])
+    out = []
+    for eps in (1e-4, 1e-7, 1e-10):
+        Q = eps * np.eye(3)
+        Q[2, 2] -= c1 * c2
+        try:
+            with np.errstate(all="ignore"):
+                X = solve_discrete_are(Ah, bh, Q, -np.ones((1, 1)), s=-sh * e3)
+        except (np.linalg.LinAlgError, ValueError):
+            continue
+        if not np.all(np.isfinite(X)):
+            continue
+        X = (X + X.T) / 2
+        out.append(X / np.outer(sp.s, sp.s))
+    return out

@@ -17,7 +17,9 @@ Conventions
   Theorem 1, and the synthesis refinement, which keeps half the best margin
   and minimises the gains so that the design is unique.)
 - Homogeneous programs are normalised by ``P <= I``.
-- Solvers: Clarabel first, SCS as fall-back. Only ``OPTIMAL`` is accepted;
+- Solvers: Clarabel first, SCS as fall-back (the synthesis programs use
+  Clarabel only: :mod:`.synthesis` falls back on an exact pole search, which is
+  faster and more reliable than SCS on those programs). Only ``OPTIMAL`` is accepted;
   ``OPTIMAL_INACCURATE`` is reported as unverified. Solver exceptions are caught
   and turned into a status string; they never escape as a traceback.
 - The programs are built once per thread with cvxpy parameters (DPP), so a
@@ -46,6 +48,7 @@ __all__ = [
     "lipschitz_margin",
     "sector_margin",
     "sampled_margin",
+    "sampled_delta_margin",
     "least_norm_lyapunov",
     "sector_synthesis",
     "sampled_synthesis",
@@ -149,7 +152,9 @@ def solver_versions() -> dict[str, str]:
     return out
 
 
-def solve(problem: cp.Problem, variables: Mapping[str, cp.Variable]) -> LMISolution:
+def solve(
+    problem: cp.Problem, variables: Mapping[str, cp.Variable], *, first_only: bool = False
+) -> LMISolution:
     """Solve with Clarabel, fall back to SCS, accept only ``OPTIMAL``.
 
     Parameters
@@ -157,6 +162,9 @@ def solve(problem: cp.Problem, variables: Mapping[str, cp.Variable]) -> LMISolut
     problem : cvxpy.Problem
     variables : mapping of str to cvxpy.Variable
         Variables whose values are returned.
+    first_only : bool
+        Try only the first solver (synthesis: its exact pole search is a better
+        fall-back than a slow SCS run on an ill-conditioned program).
 
     Returns
     -------
@@ -166,7 +174,7 @@ def solve(problem: cp.Problem, variables: Mapping[str, cp.Variable]) -> LMISolut
     attempts: list[str] = []
     last_status = "solver_error"
     last_solver = ""
-    for solver in SOLVERS:
+    for solver in SOLVERS[:1] if first_only else SOLVERS:
         try:
             with warnings.catch_warnings(), _quiet_c_output(solver in _NOISY):
                 warnings.simplefilter("ignore")
@@ -244,10 +252,10 @@ def _sym(X: cp.Expression) -> cp.Expression:
     return (X + X.T) / 2
 
 
-def _run(prog: _Program, values: Mapping[str, Any]) -> LMISolution:
+def _run(prog: _Program, values: Mapping[str, Any], *, first_only: bool = False) -> LMISolution:
     for name, value in values.items():
         prog.params[name].value = value
-    return solve(prog.problem, prog.variables)
+    return solve(prog.problem, prog.variables, first_only=first_only)
 
 
 def _build_lipschitz() -> _Program:
@@ -337,6 +345,50 @@ def sampled_margin(Ad_lo: np.ndarray, Ad_hi: np.ndarray, *, r: float) -> LMISolu
     return _run(
         prog,
         {"Ad0": np.asarray(Ad_lo, float), "Ad1": np.asarray(Ad_hi, float), "r2": float(r) ** 2},
+    )
+
+
+def _build_sampled_delta() -> _Program:
+    D = [cp.Parameter((3, 3), name=f"D{i}") for i in range(2)]
+    sh = cp.Parameter(nonneg=True, name="sh")
+    c = cp.Parameter(nonneg=True, name="c")
+    P = cp.Variable((3, 3), symmetric=True, name="P")
+    t = cp.Variable(name="t")
+    cons = [P >> t * _I3, P << _I3]
+    for Di in D:
+        PD = P @ Di
+        M = cp.bmat([[PD + PD.T + c * P, sh * PD.T], [sh * PD, -P]])
+        cons.append(_sym(M) << -t * np.eye(6))
+    prob = cp.Problem(cp.Maximize(t), cons)
+    return _Program(prob, {"D0": D[0], "D1": D[1], "sh": sh, "c": c}, {"P": P, "t": t})
+
+
+def sampled_delta_margin(D_lo: np.ndarray, D_hi: np.ndarray, *, h: float, c: float) -> LMISolution:
+    """The sampled LMI in delta form, well conditioned for small sample times.
+
+    With ``A_d = I + h D`` (scaled time), ``A_d' P A_d - r^2 P < 0`` divided by
+    ``h`` is ``He(P D) + c P + h D' P D < 0`` (``c = (1 - r^2)/h``); its Schur
+    complement form ``[[He(P D) + c P, sqrt(h) D' P], [sqrt(h) P D, -P]] <= -t I``
+    is solved at both vertices with ``t I <= P <= I``, maximising ``t``.
+
+    Parameters
+    ----------
+    D_lo, D_hi : ndarray, shape (3, 3)
+        Scaled delta-form matrices at the two ends.
+    h : float
+        Scaled sample time (``sqrt(a1) dt``).
+    c : float
+        Scaled ``(1 - r^2)/dt``.
+    """
+    prog = _program("sampled_delta", _build_sampled_delta)
+    return _run(
+        prog,
+        {
+            "D0": np.asarray(D_lo, float),
+            "D1": np.asarray(D_hi, float),
+            "sh": float(np.sqrt(h)),
+            "c": float(c),
+        },
     )
 
 
@@ -460,7 +512,7 @@ def sector_synthesis(
         values["R"] = float(radius)
     if refine:
         values["t_min"] = float(t_min)
-    return _run(prog, values)
+    return _run(prog, values, first_only=True)
 
 
 def _build_sampled_synthesis(with_disk: bool, refine: bool = False) -> Callable[[], _Program]:
@@ -532,4 +584,4 @@ def sampled_synthesis(
         values.update({"F": F, "H": H, "c": float(disk[0]), "rho": float(disk[1])})
     if refine:
         values["t_min"] = float(t_min)
-    return _run(prog, values)
+    return _run(prog, values, first_only=True)

@@ -25,6 +25,9 @@ BISECT_RTOL = 0.01
 #: Search limit for ``max_udot``: ``(|beta| + |gamma|) v <= K_HAT_CAP * sqrt(a1)``.
 K_HAT_CAP = 1e3
 
+#: The one sign convention of every :class:`Margin` (stated in its JSON).
+MARGIN_SENSE = "passed means value < limit (slack = limit - value > 0)"
+
 _U = float(np.finfo(float).eps) / 2  # unit round-off
 _E3 = np.array([0.0, 0.0, 1.0])
 _C = np.array([1.0, 0.0, 0.0])
@@ -65,6 +68,8 @@ class Margin:
             "value": self.value,
             "limit": self.limit,
             "passed": self.passed,
+            "sense": MARGIN_SENSE,
+            "slack": self.limit - self.value,
         }
 
 
@@ -85,16 +90,19 @@ class TierCertificate:
         The requested decay rate (1/s).
     max_udot : float
         The largest ``|u'|`` bound (V/s) this tier certifies for these gains with
-        the requested decay (bisection to 1 %; closed form for ``theorem1``).
+        the requested decay: exact from the frequency-domain condition (circle
+        criterion, see :mod:`bwdesign.certify.frequency`) for ``lipschitz``,
+        ``sector`` and ``sampled``; closed form for ``theorem1``.
         0 when nothing is certified; ``inf`` when the tier provably holds for
         every rate (``sampled`` with ``beta >= |gamma|``, where the jump-map
         slope stays in ``[0, 1]`` and the LMI holds on that whole interval).
     max_udot_capped : bool
         True when the tier still held at the search limit: the true envelope is
         at least ``max_udot`` (the LMI may hold for every rate).
-    decay_rate : float
+    decay_rate : float or None
         The largest certified exponential rate ``mu`` (1/s) at ``udot_max``:
-        ``||eps(t)|| <= c exp(-mu t) ||eps(0)||``. 0 where none.
+        ``||eps(t)|| <= c exp(-mu t) ||eps(0)||``; ``None`` when the tier does
+        not hold (a tier that does not hold certifies no rate).
     P : ndarray or None
         The Lyapunov matrix in original coordinates when the tier holds.
     margins : tuple of Margin
@@ -114,7 +122,7 @@ class TierCertificate:
     decay: float
     max_udot: float
     max_udot_capped: bool
-    decay_rate: float
+    decay_rate: float | None
     P: np.ndarray | None
     margins: tuple[Margin, ...]
     solver: str
@@ -253,6 +261,11 @@ class SynthesisResult:
     report : CertificateReport or None
         The re-certification of the gains.
     params : BoucWenParams
+    pole_check : Margin or None
+        The requested pole region measured on the returned gains, outside the
+        solver (continuous: ``max |lambda|`` against the radius; sampled:
+        ``max |z - 1|`` against ``1 - exp(-radius dt)``); ``feasible`` needs it
+        to pass.
     """
 
     feasible: bool
@@ -272,6 +285,7 @@ class SynthesisResult:
     status: str
     report: CertificateReport | None
     params: BoucWenParams
+    pole_check: Margin | None = None
 
     @property
     def certified(self) -> bool:
@@ -300,6 +314,7 @@ class SynthesisResult:
             "margin": self.margin,
             "solver": self.solver,
             "status": self.status,
+            "pole_check": None if self.pole_check is None else self.pole_check.to_dict(),
             "certificates": [] if rep is None else [c.to_dict() for c in rep.certificates],
             "certified": self.feasible,
             "best": None if rep is None else rep.best,

@@ -12,17 +12,22 @@ import numpy as np
 from ..errors import GainError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
+from ..observers.gains import check_gains, delta_transition, discrete_gains, error_matrix
 from ..validate import DECAY, POLE_RADIUS, UDOT_MAX, real
 from .checks import (
     _lipschitz_coefficient,
     _model_matrix,
+    _prepare_sampled,
+    _scale_continuous,
     _similar,
     continuous_equivalent,
+    rho_exponents,
     rho_interval,
     sector_interval,
 )
-from .results import _C, CertificateReport, SynthesisResult
-from .tiers import _largest_decay, _largest_rate, _search_cap, certify, certify_discrete
+from .frequency import continuous_family, sampled_family
+from .results import _C, K_HAT_CAP, CertificateReport, Margin, SynthesisResult
+from .tiers import _largest_decay, _largest_rate, certify, certify_discrete
 
 __all__ = ["synthesize", "default_pole_radius"]
 
@@ -61,7 +66,20 @@ def synthesize(
     smallest ``||Y||^2 + 0.01 ||P||_F^2`` with margin ``t*/2``: the least
     aggressive gains that keep half the best margin, a unique and reproducible
     design. Either way the result is re-certified by :func:`certify` before it
-    is called feasible.
+    is called feasible, and the pole region is measured on the returned gains
+    outside the solver (``pole_check``: ``max |lambda|`` against ``pole_radius``
+    in continuous time, ``max |z - 1|`` against ``1 - exp(-pole_radius dt)`` with
+    ``dt``); a design that leaves the region is not feasible.
+
+    When the LMI design is infeasible or rejected, a fixed set of pole patterns
+    (magnitudes ``sqrt(a1) 2^(k/2)``, four shapes) inside the region is searched
+    with the exact frequency-domain criterion, and the best ones are certified.
+    Monotonicity in the radius: the pattern set of a larger radius contains that
+    of a smaller one, so an answer found by the search stays feasible for every
+    larger radius; an answer found only by the LMI (whose solution depends on
+    the radius) is not guaranteed to be found again for a larger one, but the
+    search then still runs. A "no" names the binding requirement with the
+    numbers the exact criterion gives over the searched patterns.
 
     Parameters
     ----------
@@ -123,6 +141,159 @@ def _attempt(sol: Any) -> _Attempt:
     return _Attempt(bool(sol.ok and t is not None and t > 0), sol, t)
 
 
+def _pole_disk(
+    params: BoucWenParams,
+    gains: tuple[float, float, float] | None,
+    K: tuple[float, float, float] | None,
+    R: float,
+    dt: float | None,
+) -> Margin:
+    """The requested pole region, measured on the returned gains (outside the solver).
+
+    Continuous: ``max |lambda_i| < R`` for the eigenvalues of ``A0 - l C``.
+    Sampled: the discrete poles ``z_i`` of ``(I - K C) F`` in ``|z - 1| < 1 - exp(-R dt)``,
+    with ``z_i - 1 = dt delta_i`` from the delta form (no cancellation).
+    """
+    w = math.sqrt(params.a1)
+    T = np.array([1.0, w, 1.0])
+    if dt is None:
+        if gains is None:
+            return Margin("max |pole| (rad/s)", math.inf, R)
+        lam = np.linalg.eigvals(_similar(error_matrix(params, gains), T) / w) * w
+        return Margin("max |pole| of A0 - l C (rad/s)", float(np.max(np.abs(lam))), R)
+    if K is None:
+        return Margin("max |z - 1|", math.inf, -math.expm1(-R * dt))
+    F, Fd = delta_transition(params, dt)
+    Ad1 = Fd - np.outer(np.asarray(K) / dt, F[0])
+    d = np.linalg.eigvals(_similar(Ad1, T) / w) * w
+    return Margin(
+        "max |z - 1| of the discrete poles", float(dt * np.max(np.abs(d))), -math.expm1(-R * dt)
+    )
+
+
+#: Pole patterns of the exact search, as multiples of a magnitude ``m``: a real
+#: triple, two damped pairs with a real pole, and a slow real pole with a pair.
+_SHAPES = (
+    np.array([1.0, 1.0, 1.0]),
+    np.array([1.0, 0.7 + 0.714j, 0.7 - 0.714j]),
+    np.array([1.0, 0.3 + 0.954j, 0.3 - 0.954j]),
+    np.array([0.1, 0.7 + 0.714j, 0.7 - 0.714j]),
+)
+#: Magnitudes of the exact search: ``sqrt(a1) 2^(k/2)``, ``k = -SEARCH_OCTAVES .. SEARCH_OCTAVES``.
+SEARCH_OCTAVES = 24
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    gains: tuple[float, float, float]
+    poles: np.ndarray
+    radius: float  # the smallest request radius (rad/s) whose region contains the poles
+
+
+def _candidates(params: BoucWenParams, dt: float | None) -> list[_Candidate]:
+    """A fixed set of pole patterns (independent of the request's radius)."""
+    w0 = math.sqrt(params.a1)
+    out = []
+    for k in range(-SEARCH_OCTAVES, SEARCH_OCTAVES + 1):
+        m = w0 * 2.0 ** (k / 2)
+        for shape in _SHAPES:
+            lam = -m * shape
+            c = np.real(np.poly(lam))
+            l1 = c[1] - params.a2
+            l2 = c[2] - params.a1 - l1 * params.a2
+            l3 = -c[3] / params.a1
+            if dt is None:
+                radius = float(np.max(np.abs(lam)))
+            else:
+                zm1 = float(np.max(np.abs(_expm1c(lam * dt))))
+                radius = math.inf if zm1 >= 1.0 else -math.log1p(-zm1) / dt
+            out.append(_Candidate((float(l1), float(l2), float(l3)), lam, radius))
+    return out
+
+
+def _expm1c(x: np.ndarray) -> np.ndarray:
+    a, b = x.real, x.imag
+    return np.expm1(a) * np.cos(b) - 2.0 * np.sin(b / 2.0) ** 2 + 1j * np.exp(a) * np.sin(b)
+
+
+def _exact_score(
+    params: BoucWenParams, gains: tuple[float, float, float], v: float, mu: float, dt: float | None
+) -> float:
+    """Exact margin of the tier's criterion at ``(v, mu)``: > 0 when a certificate exists."""
+    try:
+        gl = tuple(check_gains(params, gains).tolist())
+    except GainError:
+        return -math.inf
+    sc = _scale_continuous(params, error_matrix(params, gl))
+    g = abs(params.gamma)
+    if dt is None:
+        if not mu < -sc.spectral_abscissa():
+            return -math.inf
+        fam = continuous_family(sc.Ahat, sc.w)
+        a, b = min(0.0, params.beta - g), max(0.0, params.beta + g)
+        return 1.0 - v * fam.inverse_envelope(a, b, mu)
+    sp = _prepare_sampled(params, discrete_gains(params, gl, dt), dt)
+    fam = sampled_family(sp.Ad1, sp.b, sp.s, sp.w, dt)
+    if not mu < fam.decay_cap():
+        return -math.inf
+    x_lo, x_hi = rho_exponents(params, v, dt)
+    if not x_hi < 300.0:
+        return -math.inf
+    return fam.min_q(-math.expm1(x_hi) / dt, -math.expm1(x_lo) / dt, mu)
+
+
+class _Searched:
+    """Stand-in solution for gains found by the exact pole search."""
+
+    ok = True
+    status = "exact search"
+    solver = "exact search"
+    attempts = ()
+
+
+def _search(
+    params: BoucWenParams,
+    udot_max: float,
+    decay: float,
+    R: float,
+    dt: float | None,
+    allow_unbounded: bool,
+    first: _Attempt,
+) -> SynthesisResult | None:
+    """Before answering "infeasible": the exact criterion over pole patterns in the region.
+
+    The patterns form a fixed set filtered by the region, so a larger region
+    searches a superset: if the search finds gains for a radius it finds them
+    for every larger one.
+    """
+    inside = [c for c in _candidates(params, dt) if c.radius < R * (1 - 1e-12)]
+    scored = sorted(
+        ((_exact_score(params, c.gains, udot_max, decay, dt), i) for i, c in enumerate(inside)),
+        reverse=True,
+    )
+    tier = "sector" if dt is None else "sampled"
+    for score, i in scored[:3]:
+        if not score > 0:
+            break
+        c = inside[i]
+        K = None if dt is None else tuple(float(x) for x in discrete_gains(params, c.gains, dt))
+        res = _finish(
+            params,
+            _Attempt(True, _Searched(), None),
+            c.gains,
+            K,
+            tier,
+            udot_max,
+            decay,
+            R,
+            dt,
+            allow_unbounded,
+        )
+        if res.feasible:
+            return res
+    return None
+
+
 def _diagnose(
     params: BoucWenParams,
     attempt: Callable[[float, float, bool], _Attempt],
@@ -133,8 +304,13 @@ def _diagnose(
     R: float,
     dt: float | None,
     first: _Attempt,
+    rejected: str = "",
 ) -> SynthesisResult:
-    """Name the binding requirement of an infeasible request."""
+    """Name the binding requirement of a request for which no gains were found.
+
+    The numbers come from the exact criterion over the search's pole patterns
+    inside the region (and, for the pole radius, outside it).
+    """
     common = dict(
         feasible=False,
         tier=tier,
@@ -150,61 +326,113 @@ def _diagnose(
         report=None,
         params=params,
     )
-    if not first.sol.ok and not isinstance(first.sol, _NoSolve):
+    cands = _candidates(params, dt)
+    inside = [c for c in cands if c.radius < R * (1 - 1e-12)]
+    if any(_exact_score(params, c.gains, udot_max, decay, dt) > 0 for c in inside):
+        # gains exist by the exact criterion, but none passed re-certification
+        solved = first.sol.ok or isinstance(first.sol, _NoSolve)
         return SynthesisResult(
-            binding="solver",
+            binding="verification" if solved else "solver",
             reason=(
-                f"the {tier} synthesis LMI was not solved ({'; '.join(first.sol.attempts)}); "
-                "no gains are certified"
+                f"the exact criterion admits gains within pole radius {R:g} rad/s at "
+                f"|u'| <= {udot_max:g} V/s, but none passed re-certification (the {tier} "
+                f"synthesis LMI: {'; '.join(first.sol.attempts) or first.sol.status}); no "
+                "gains are certified"
             ),
             max_decay=None,
             max_udot=None,
             **common,
         )
-    where = f"within pole radius {R:g} rad/s at |u'| <= {udot_max:g} V/s ({tier} tier)"
-    if decay > 0 and attempt(udot_max, 0.0, True).ok:
-        cap = decay
-        max_decay = _largest_decay(lambda m: attempt(udot_max, m, True).ok, cap)
-        free = attempt(udot_max, decay, False).ok
-        reason = (
-            f"decay {decay:g} 1/s is not reachable {where}; the largest certifiable decay "
-            f"there is {max_decay:.4g} 1/s"
-        )
-        if free:
-            reason += "; without the pole region it is reachable, so a larger pole radius may help"
-        return SynthesisResult(
-            binding="pole_radius" if free else "decay",
-            reason=reason,
-            max_decay=max_decay,
-            max_udot=None,
-            **common,
-        )
-    cap = _search_cap(params)
-    if dt is not None and _lipschitz_coefficient(params) > 0:
-        cap = min(cap, 50.0 / (_lipschitz_coefficient(params) * dt))
-    max_udot, _ = _largest_rate(lambda v: attempt(v, 0.0, True).ok, udot_max, min(cap, udot_max))
-    if attempt(udot_max, 0.0, False).ok:
-        return SynthesisResult(
-            binding="pole_radius",
-            reason=(
-                f"no gains with poles within radius {R:g} rad/s certify |u'| <= {udot_max:g} V/s "
-                f"({tier} tier; the largest certifiable within that radius is {max_udot:.4g} V/s); "
-                "without the pole region they exist, so raise the pole radius"
-            ),
-            max_decay=None,
-            max_udot=max_udot,
-            **common,
-        )
+    if not first.sol.ok:
+        lmi_note = f"; the synthesis LMI was not solved ({first.sol.status})"
+    elif rejected:
+        lmi_note = f"; the LMI design was rejected: {rejected}"
+    else:
+        lmi_note = f"; the synthesis LMI has no strictly feasible point (t = {first.t:.3g})"
+    where = (
+        f"within pole radius {R:g} rad/s at |u'| <= {udot_max:g} V/s ({tier} tier; "
+        f"{len(inside)} pole patterns searched)"
+    )
+    if decay > 0:
+        at_zero = [c for c in inside if _exact_score(params, c.gains, udot_max, 0.0, dt) > 0]
+        lmi_zero = attempt(udot_max, 0.0, True).ok
+        if at_zero or lmi_zero:
+            best = 0.0
+            if lmi_zero:  # the LMI's own answer, as a lower bound
+                best = _largest_decay(lambda m: attempt(udot_max, m, True).ok, decay)
+            at_zero.sort(key=lambda c: float(np.max(c.poles.real)))
+            for c in at_zero[:BEST_OF]:
+                cap = decay
+                best = max(
+                    best,
+                    _largest_decay(
+                        lambda m, g=c.gains: _exact_score(params, g, udot_max, m, dt) > 0, cap
+                    ),
+                )
+            return SynthesisResult(
+                binding="decay",
+                reason=(
+                    f"decay {decay:g} 1/s is not reachable {where}; the largest decay found "
+                    f"there is {best:.4g} 1/s" + lmi_note
+                ),
+                max_decay=best,
+                max_udot=None,
+                **common,
+            )
+    outside = sorted(
+        (c for c in cands if c.radius >= R * (1 - 1e-12) and math.isfinite(c.radius)),
+        key=lambda c: c.radius,
+    )
+    for c in outside:
+        if _exact_score(params, c.gains, udot_max, decay, dt) > 0:
+            return SynthesisResult(
+                binding="pole_radius",
+                reason=(
+                    f"no gains found that certify decay {decay:g} 1/s {where}; gains with "
+                    f"poles within {c.radius:.4g} rad/s do, so raise the pole radius" + lmi_note
+                ),
+                max_decay=None,
+                max_udot=_best_envelope(params, inside, decay, dt),
+                **common,
+            )
+    best = _best_envelope(params, inside, decay, dt)
     return SynthesisResult(
         binding="udot_max",
         reason=(
-            f"|u'| <= {udot_max:g} V/s cannot be certified by any gains at the {tier} tier "
-            f"(within pole radius {R:g} rad/s the largest certifiable is {max_udot:.4g} V/s)"
+            f"|u'| <= {udot_max:g} V/s with decay {decay:g} 1/s is not certifiable by any gains "
+            f"found at the {tier} tier (searched {where} and beyond it); the largest envelope "
+            f"found is {best:.4g} V/s" + lmi_note
         ),
         max_decay=None,
-        max_udot=max_udot,
+        max_udot=best,
         **common,
     )
+
+
+#: The largest envelope of a "no" is measured on this many of the best-ranked patterns.
+BEST_OF = 4
+
+
+def _best_envelope(
+    params: BoucWenParams, cands: list[_Candidate], decay: float, dt: float | None
+) -> float:
+    """Largest exact envelope (V/s) at ``decay`` over the candidates (bisection in ``v``)."""
+    best = 0.0
+    c_coef = _lipschitz_coefficient(params)
+    if c_coef == 0:
+        return math.inf
+    probe = 1e-3 * K_HAT_CAP * math.sqrt(params.a1) / c_coef
+    ranked = sorted(cands, key=lambda c: -_exact_score(params, c.gains, probe, decay, dt))
+    for c in ranked[:BEST_OF]:
+        if _exact_score(params, c.gains, best * (1 + 1e-3) if best > 0 else 1e-300, decay, dt) > 0:
+            v, _ = _largest_rate(
+                lambda v, g=c.gains: _exact_score(params, g, v, decay, dt) > 0,
+                max(best, 1.0),
+                K_HAT_CAP * math.sqrt(params.a1) / c_coef,
+                rtol=1e-3,
+            )
+            best = max(best, v)
+    return best
 
 
 def _synthesize_continuous(
@@ -231,22 +459,32 @@ def _synthesize_continuous(
         return _attempt(sol)
 
     first = attempt(udot_max, decay, True)
-    if not first.ok:
-        return _diagnose(
-            params,
-            attempt,
-            tier="sector",
-            udot_max=udot_max,
-            decay=decay,
-            R=R,
-            dt=None,
-            first=first,
+    rejected = ""
+    if first.ok:
+        design = _refine(first, lambda t_min: attempt(udot_max, decay, True, t_min))
+        P = np.asarray(design.sol["P"])
+        lh = np.linalg.solve((P + P.T) / 2, np.asarray(design.sol["Y"]).ravel())
+        gains = tuple(float(x) for x in w * T * lh)
+        res = _finish(
+            params, first, gains, None, "sector", udot_max, decay, R, None, allow_unbounded
         )
-    design = _refine(first, lambda t_min: attempt(udot_max, decay, True, t_min))
-    P = np.asarray(design.sol["P"])
-    lh = np.linalg.solve((P + P.T) / 2, np.asarray(design.sol["Y"]).ravel())
-    gains = tuple(float(x) for x in w * T * lh)
-    return _finish(params, first, gains, None, "sector", udot_max, decay, R, None, allow_unbounded)
+        if res.feasible:
+            return res
+        rejected = res.reason
+    found = _search(params, udot_max, decay, R, None, allow_unbounded, first)
+    if found is not None:
+        return found
+    return _diagnose(
+        params,
+        attempt,
+        tier="sector",
+        udot_max=udot_max,
+        decay=decay,
+        R=R,
+        dt=None,
+        first=first,
+        rejected=rejected,
+    )
 
 
 def _synthesize_sampled(
@@ -277,16 +515,31 @@ def _synthesize_sampled(
         return _attempt(sol)
 
     first = attempt(udot_max, decay, True)
-    if not first.ok:
-        return _diagnose(
-            params, attempt, tier="sampled", udot_max=udot_max, decay=decay, R=R, dt=dt, first=first
-        )
-    design = _refine(first, lambda t_min: attempt(udot_max, decay, True, t_min))
-    P = np.asarray(design.sol["P"])
-    Kh = np.linalg.solve((P + P.T) / 2, np.asarray(design.sol["Y"]).ravel())
-    K = tuple(float(x) for x in T * Kh)
-    gains = continuous_equivalent(params, K, dt)
-    return _finish(params, first, gains, K, "sampled", udot_max, decay, R, dt, allow_unbounded)
+    rejected = ""
+    if first.ok:
+        design = _refine(first, lambda t_min: attempt(udot_max, decay, True, t_min))
+        P = np.asarray(design.sol["P"])
+        Kh = np.linalg.solve((P + P.T) / 2, np.asarray(design.sol["Y"]).ravel())
+        K = tuple(float(x) for x in T * Kh)
+        gains = continuous_equivalent(params, K, dt)
+        res = _finish(params, first, gains, K, "sampled", udot_max, decay, R, dt, allow_unbounded)
+        if res.feasible:
+            return res
+        rejected = res.reason
+    found = _search(params, udot_max, decay, R, dt, allow_unbounded, first)
+    if found is not None:
+        return found
+    return _diagnose(
+        params,
+        attempt,
+        tier="sampled",
+        udot_max=udot_max,
+        decay=decay,
+        R=R,
+        dt=dt,
+        first=first,
+        rejected=rejected,
+    )
 
 
 #: The refinement keeps this fraction of the best synthesis margin.
@@ -359,6 +612,13 @@ def _finish(
     holds = report is not None and report.tier(tier).holds
     if report is not None and report.discrete_gains is not None:
         K = report.discrete_gains
+    disk = _pole_disk(params, gains, K, R, dt)
+    if holds and not disk.passed:
+        holds = False
+        problem = (
+            f"its poles leave the requested region: {disk.name} is {disk.value:.6g} "
+            f"(limit {disk.limit:.6g})"
+        )
     if holds:
         what = f"gains l = ({', '.join(f'{g:.6g}' for g in gains)})" if gains else "discrete gains"
         reason = (
@@ -367,6 +627,7 @@ def _finish(
         )
         if tier == "sampled" and gains is None:
             reason += "; the discrete poles have no exact continuous equivalent"
+        reason += f" (checked: {disk.name} = {disk.value:.6g} < {disk.limit:.6g})"
     else:
         reason = "the synthesised gains did not pass re-certification" + (
             f": {problem}" if problem else f" ({report.tier(tier).status})" if report else ""
@@ -389,4 +650,5 @@ def _finish(
         status=first.sol.status,
         report=report,
         params=params,
+        pole_check=disk,
     )

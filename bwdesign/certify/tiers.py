@@ -38,16 +38,35 @@ for ``|u'| <= v`` (``v = udot_max``, V/s). The tiers, weakest first:
     own :func:`bwdesign.observers.discrete_gains`, so the tier certifies exactly
     the gain the sampled :class:`~bwdesign.HysteresisObserver` runs.
 
-Numerics: every LMI is solved in scaled coordinates (``x2`` scaled by
+Envelopes and decay rates (``lipschitz``, ``sector``, ``sampled``) are exact:
+each tier's perturbation is rank one, so a common quadratic Lyapunov function
+exists exactly when the circle criterion holds (lossless S-procedure, KYP),
+and :mod:`.frequency` evaluates that condition (continuous, or discrete in
+delta form) on a pole-adapted frequency grid refined by Brent. ``max_udot`` is
+the envelope at the requested decay; ``decay_rate`` the largest decay at
+``udot_max`` (``None`` when the tier does not hold). There is no search limit
+(``max_udot_capped`` is always False; ``inf`` means every rate).
+
+The verdict ``holds`` needs a Lyapunov matrix at ``udot_max`` and the requested
+decay that passed the outside check: first the stabilising solution of the
+tier's KYP Riccati equation (no solver), then the LMI (Clarabel, SCS), then the
+matrix of a weaker tier (``theorem1``'s ``P`` rescaled is a lipschitz
+certificate, the lipschitz ``P`` a sector one), so among the continuous tiers a
+stronger tier never certifies less than a weaker one. ``sampled`` is a
+different (discrete) system and is not ordered against them.
+
+Numerics: everything is solved in scaled coordinates (``x2`` scaled by
 ``w0 = sqrt(a1)``, time by ``w0``, then diagonal balancing), because ``a1``
-spans 1e3..1e9. The solver's matrices are mapped back, and a tier says
-``holds: true`` only after ``P > 0`` and every LMI block has been re-checked in
-the original coordinates with ``numpy.linalg.eigvalsh`` (see :class:`Margin`).
+spans 1e3..1e9; the sampled tier in delta form ``(A_d - I)/dt``, formed without
+cancellation, so it stays well conditioned as ``dt -> 0``. The matrices are
+mapped back, and a tier says ``holds: true`` only after ``P > 0`` and every LMI
+block has been re-checked in the original coordinates with
+``numpy.linalg.eigvalsh`` (see :class:`Margin`); the sampled blocks are checked
+divided by ``dt`` (delta form).
 """
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -66,15 +85,22 @@ from .checks import (
     _check_sampled,
     _check_sector,
     _cont_err,
+    _dare_candidates,
+    _kyp_candidates,
+    _lipschitz_candidates,
     _lipschitz_coefficient,
     _posdef,
     _prepare_sampled,
     _scale_continuous,
     _Scaled,
-    _similar,
+    _verify_lipschitz,
+    _verify_sampled,
+    _verify_sector,
+    rho_exponents,
     rho_interval,
     sector_interval,
 )
+from .frequency import continuous_family, sampled_family
 from .results import (
     _U,
     BISECT_RTOL,
@@ -160,40 +186,83 @@ def _search_cap(params: BoucWenParams) -> float:
     return K_HAT_CAP * math.sqrt(params.a1) / c if c > 0 else math.inf
 
 
-def _lmi_tier(
+def _exact_tier(
     name: str,
-    check: Callable[[float, float], _Check],
     *,
     udot_max: float,
     decay: float,
-    cap: float,
-    decay_cap: Callable[[float], float],
+    envelope: float,
+    check: Callable[[], _Check],
+    candidates: Sequence[tuple[str, Callable[[], _Check]]],
+    decay_rate: Callable[[], float],
     details: dict[str, Any],
-    every_rate: Callable[[float], _Check] | None = None,
 ) -> TierCertificate:
-    check = functools.lru_cache(maxsize=None)(check)
-    main = check(udot_max, decay)
-    if main.ok and every_rate is not None and every_rate(decay).ok:
-        max_udot, capped = math.inf, False
+    """A tier whose envelope is exact (frequency domain) and whose verdict is a checked P.
+
+    ``holds`` needs a Lyapunov matrix that passed the outside check at
+    ``udot_max`` and ``decay``: the LMI's, or one of the ``candidates`` (matrices
+    of weaker tiers, which are certificates for this tier too). The LMI is
+    solved only when the exact criterion says a certificate exists.
+    """
+    exact_ok = udot_max < envelope
+    main: _Check | None = None
+    source = ""
+    # the Riccati (KYP) matrices first: no solver, and exact up to round-off
+    for label, cand in candidates:
+        if label == "kyp" and exact_ok:
+            c = cand()
+            if c.ok:
+                main, source = c, label
+                break
+    if main is None and exact_ok:
+        main, source = check(), "lmi"
+    if main is None or not main.ok:
+        for label, cand in candidates:
+            if label == "kyp":
+                continue
+            c = cand()
+            if c.ok:
+                main, source = c, label
+                break
+    holds = main is not None and main.ok
+    details = {**details, "exact_envelope": envelope, "P_source": source if holds else None}
+    if main is not None and main.t is not None:
+        details["lmi_margin"] = main.t
+    if holds:
+        status = {
+            "lmi": "certified",
+            "kyp": "certified (P from the KYP Riccati equation)",
+        }.get(source, f"certified (P of the {source} tier)")
+        rate = max(decay, decay_rate())
     else:
-        max_udot, capped = _largest_rate(lambda v: check(v, decay).ok, udot_max, cap)
-    rate = _largest_decay(lambda m: check(udot_max, m).ok, decay_cap(udot_max))
-    if main.ok and rate < decay:
-        rate = decay  # the requested decay itself was verified
-    if main.t is not None:
-        details = {**details, "lmi_margin": main.t}
+        rate = None
+        if not exact_ok:
+            status = (
+                f"not certified: |u'| <= {udot_max:g} V/s is not below this tier's exact "
+                f"envelope {envelope:.6g} V/s at decay {decay:g} 1/s"
+            )
+            best = decay_rate() if decay > 0 else 0.0
+            if best > 0:
+                details["largest_decay"] = best
+                status += f" (at this rate the largest certifiable decay is {best:.4g} 1/s)"
+        else:
+            status = (
+                f"{main.status if main is not None else 'not certified'} (the exact criterion "
+                f"holds: udot_max / envelope = {udot_max / envelope:.6g}; no Lyapunov matrix "
+                "passed the outside check)"
+            )
     return TierCertificate(
         name=name,
-        holds=main.ok,
+        holds=holds,
         udot_max=udot_max,
         decay=decay,
-        max_udot=max_udot,
-        max_udot_capped=capped,
+        max_udot=max(envelope, udot_max) if holds else envelope,
+        max_udot_capped=False,
         decay_rate=rate,
-        P=main.P,
-        margins=main.margins,
-        solver=main.solver,
-        status=main.status,
+        P=main.P if holds else None,
+        margins=main.margins if main is not None else (),
+        solver=main.solver if main is not None else "",
+        status=status,
         details=dict(details),
     )
 
@@ -201,7 +270,9 @@ def _lmi_tier(
 # -- the tiers ----------------------------------------------------------------------
 
 
-def _theorem1(params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float) -> TierCertificate:
+def _theorem1(
+    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float, prev: dict
+) -> TierCertificate:
     from . import lmi
 
     c = _lipschitz_coefficient(params)
@@ -258,7 +329,7 @@ def _theorem1(params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float)
             decay=decay,
             max_udot=0.0,
             max_udot_capped=False,
-            decay_rate=0.0,
+            decay_rate=None,
             P=None,
             margins=tuple(r[3] for r in results),
             solver="scipy",
@@ -291,7 +362,7 @@ def _theorem1(params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float)
         decay=decay,
         max_udot=max_udot,
         max_udot_capped=False,
-        decay_rate=rate,
+        decay_rate=rate if holds else None,
         P=_frozen(P) if holds else None,
         margins=margins,
         solver=solver,
@@ -300,35 +371,101 @@ def _theorem1(params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float)
     )
 
 
-def _lipschitz(
-    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float
+def _circle_envelope(fam: Any, lo: float, hi: float, mu: float, alpha0: float) -> float:
+    """Exact envelope (V/s) of the sector ``[lo v, hi v]`` at decay ``mu`` (circle criterion)."""
+    if not mu < alpha0:
+        return 0.0
+    inv = fam.inverse_envelope(lo, hi, mu)
+    return math.inf if inv <= 0 else 1.0 / inv
+
+
+def _continuous_exact(
+    name: str,
+    params: BoucWenParams,
+    sc: _Scaled,
+    udot_max: float,
+    decay: float,
+    lo: float,
+    hi: float,
+    check: Callable[[], _Check],
+    candidates: Sequence[tuple[str, Callable[[], _Check]]],
+    details: dict[str, Any],
 ) -> TierCertificate:
-    c = _lipschitz_coefficient(params)
+    fam = continuous_family(sc.Ahat, sc.w)
     alpha0 = -sc.spectral_abscissa()
-    return _lmi_tier(
-        "lipschitz",
-        lambda v, m: _check_lipschitz(sc, c * v, m),
+
+    def rate() -> float:
+        return fam.largest_decay(lambda m: udot_max < _circle_envelope(fam, lo, hi, m, alpha0))
+
+    return _exact_tier(
+        name,
         udot_max=udot_max,
         decay=decay,
-        cap=_search_cap(params),
-        decay_cap=lambda v: alpha0,
-        details={"L": c * udot_max},
+        envelope=_circle_envelope(fam, lo, hi, decay, alpha0),
+        check=check,
+        candidates=candidates,
+        decay_rate=rate,
+        details=details,
     )
 
 
-def _sector(params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float) -> TierCertificate:
-    def cap_at(v: float) -> float:
-        return -max(sc.spectral_abscissa(k) for k in sector_interval(params, v))
+def _lipschitz(
+    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float, prev: dict
+) -> TierCertificate:
+    c = _lipschitz_coefficient(params)
+    L = c * udot_max
+    cands = []
+    for P in _kyp_candidates(sc, -L, L, decay) if udot_max < math.inf else ():
+        cands.append(("kyp", lambda P=P: _verify_lipschitz(sc, L, decay, P, "scipy", None)))
+    th = prev.get("theorem1")
+    if th is not None and th.holds:
+        for P in _lipschitz_candidates(np.asarray(th.P), L):
+            cands.append(
+                ("theorem1", lambda P=P: _verify_lipschitz(sc, L, decay, P, th.solver, None))
+            )
+    return _continuous_exact(
+        "lipschitz",
+        params,
+        sc,
+        udot_max,
+        decay,
+        -c,
+        c,
+        lambda: _check_lipschitz(sc, L, decay),
+        cands,
+        {"L": L},
+    )
 
+
+def _sector(
+    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float, prev: dict
+) -> TierCertificate:
     k_lo, k_hi = sector_interval(params, udot_max)
-    return _lmi_tier(
+    g = abs(params.gamma)
+    cands = []
+    for P in _kyp_candidates(sc, k_lo, k_hi, decay):
+        cands.append(("kyp", lambda P=P: _verify_sector(sc, k_lo, k_hi, decay, P, "scipy", None)))
+    for name in ("lipschitz", "theorem1"):
+        cert = prev.get(name)
+        if cert is not None and cert.holds:
+            Pc = np.asarray(cert.P)
+            cands.append(
+                (
+                    name,
+                    lambda P=Pc, s=cert.solver: _verify_sector(sc, k_lo, k_hi, decay, P, s, None),
+                )
+            )
+    return _continuous_exact(
         "sector",
-        lambda v, m: _check_sector(sc, *sector_interval(params, v), m),
-        udot_max=udot_max,
-        decay=decay,
-        cap=_search_cap(params),
-        decay_cap=cap_at,
-        details={"k_interval": [k_lo, k_hi]},
+        params,
+        sc,
+        udot_max,
+        decay,
+        min(0.0, params.beta - g),
+        max(0.0, params.beta + g),
+        lambda: _check_sector(sc, k_lo, k_hi, decay),
+        cands,
+        {"k_interval": [k_lo, k_hi]},
     )
 
 
@@ -337,46 +474,44 @@ def _sampled(
 ) -> TierCertificate:
     sp = _prepare_sampled(params, K, dt)
     c = _lipschitz_coefficient(params)
-    cap = min(_search_cap(params), 50.0 / (c * dt)) if c > 0 else math.inf
+    fam = sampled_family(sp.Ad1, sp.b, sp.s, sp.w, dt)
+    cap = fam.decay_cap()
 
-    def check(v: float, m: float) -> _Check:
-        lo, hi = rho_interval(params, v, dt)
-        return _check_sampled(sp, lo, hi, math.exp(-m * dt))
+    def kfun(v: float) -> tuple[float, float]:
+        x_lo, x_hi = rho_exponents(params, v, dt)
+        return -math.expm1(x_hi) / dt, -math.expm1(x_lo) / dt
 
-    def every_rate(m: float) -> _Check:
-        # beta >= |gamma|: rho in [exp(-(beta + |gamma|) v dt), 1] within [0, 1] for every v
-        return _check_sampled(sp, 0.0, 1.0, math.exp(-m * dt))
+    def feasible(v: float, m: float) -> bool:
+        return m < cap and fam.min_q(*kfun(v), m) > 0
 
-    def decay_cap(v: float) -> float:
-        radii = []
-        for rho in rho_interval(params, v, dt):
-            if not math.isfinite(rho):
-                return 0.0
-            Ad = sp.IKC_F.copy()
-            Ad[:, 2] *= rho
-            radii.append(float(np.max(np.abs(np.linalg.eigvals(_similar(Ad, sp.s))))))
-        rmax = max(radii)
-        return -math.log(rmax) / dt if 0 < rmax < 1 else (math.inf if rmax == 0 else 0.0)
-
-    def capped_decay(v: float) -> float:
-        cap_v = decay_cap(v)
-        return cap_v if math.isfinite(cap_v) else 50.0 / dt
-
+    if not decay < cap:
+        env = 0.0
+    elif c == 0:
+        env = math.inf
+    else:
+        env = fam.envelope_by_bisection(kfun, decay, 300.0 / (c * dt))
+    x_lo, x_hi = rho_exponents(params, udot_max, dt)
     rho_lo, rho_hi = rho_interval(params, udot_max, dt)
-    return _lmi_tier(
+    return _exact_tier(
         "sampled",
-        check,
         udot_max=udot_max,
         decay=decay,
-        cap=cap,
-        decay_cap=capped_decay,
+        envelope=env,
+        check=lambda: _check_sampled(sp, x_lo, x_hi, decay),
+        candidates=[
+            ("kyp", lambda P=P: _verify_sampled(sp, x_lo, x_hi, decay, P, "scipy", None))
+            for P in _dare_candidates(sp, *kfun(udot_max), decay)
+        ]
+        if udot_max < env
+        else (),
+        decay_rate=lambda: fam.largest_decay(lambda m: feasible(udot_max, m)),
         details={
             "dt": dt,
             "rho_interval": [rho_lo, rho_hi],
             "discrete_gains": [float(x) for x in K],
             "r": math.exp(-decay * dt),
+            "nominal_decay": cap,
         },
-        every_rate=every_rate if params.beta >= abs(params.gamma) else None,
     )
 
 
@@ -457,9 +592,11 @@ def certify(
         if "sampled" in wanted and dt is None:
             raise InputError("the sampled tier needs the sample time dt (s)")
     certs = []
+    prev: dict[str, TierCertificate] = {}
     for name in TIERS:
         if name in wanted and name != "sampled":
-            certs.append(_CONTINUOUS_TIERS[name](params, sc, udot_max, decay))
+            prev[name] = _CONTINUOUS_TIERS[name](params, sc, udot_max, decay, prev)
+            certs.append(prev[name])
     K = None
     if dt is not None:
         K = discrete_gains(params, gains, dt)

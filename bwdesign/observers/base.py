@@ -12,7 +12,7 @@ from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import _check_dt, discretize, hysteresis_increment
 from .dynamics import observer_iosystem
-from .gains import C, _as_gains, check_gains, discrete_gains
+from .gains import C, _as_gains, check_gains, discrete_gains, schur_margin
 
 
 def _finite_scalar(v: Any, name: str) -> float:
@@ -167,6 +167,13 @@ class _SampledObserver:
         if discrete is None:
             self.gains = check_gains(params, gains)
             self.K = discrete_gains(params, self.gains, self.dt)
+            margin, z = schur_margin(params, self.K, self.dt)
+            if not margin < 0:
+                raise GainError(
+                    f"gains l = {self.gains.tolist()} at dt = {self.dt:g} s give discrete gains "
+                    f"K = {self.K.tolist()} whose nominal error dynamics (I - K C) F are not "
+                    f"Schur stable (max |z|^2 - 1 = {margin:.3g}, poles {np.round(z, 12).tolist()})"
+                )
         else:
             self.gains = None
             self.K = _as_gains(discrete, "discrete gains K")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from numbers import Real
 from typing import Any
@@ -13,7 +14,14 @@ from ..model.params import BoucWenParams
 from ..model.plant import _check_dt, discretize
 from ..validate import GAIN
 
-__all__ = ["check_gains", "error_matrix", "discrete_gains"]
+__all__ = [
+    "check_gains",
+    "error_matrix",
+    "discrete_gains",
+    "place_discrete",
+    "delta_transition",
+    "schur_margin",
+]
 
 
 C = np.array([1.0, 0.0, 0.0])
@@ -85,13 +93,66 @@ def error_matrix(params: BoucWenParams, gains: Any) -> np.ndarray:
     return np.array([[-l1, 1.0, 0.0], [-(params.a1 + l2), -params.a2, -params.a1], [-l3, 0.0, 0.0]])
 
 
+def _expm1_complex(x: np.ndarray) -> np.ndarray:
+    """``exp(x) - 1`` for complex ``x`` without cancellation near ``x = 0``."""
+    x = np.asarray(x, dtype=complex)
+    a, b = x.real, x.imag
+    re = np.expm1(a) * np.cos(b) - 2.0 * np.sin(b / 2.0) ** 2
+    return re + 1j * np.exp(a) * np.sin(b)
+
+
+def delta_transition(params: BoucWenParams, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``F = expm(A0 dt)`` and its delta form ``(F - I)/dt``, both accurate to round-off.
+
+    ``(F - I)/dt = A0 phi1(A0 dt)`` with ``phi1(X) = (expm(X) - I) X^-1``, taken
+    from the exponential of the augmented matrix ``[[A0 dt, I], [0, 0]]`` in the
+    coordinates ``(x1, x2/sqrt(a1), x3)``, so nothing cancels when ``|lambda| dt``
+    is small (subtracting ``I`` from ``F`` would lose ``-log10(|lambda| dt)``
+    digits).
+
+    Returns
+    -------
+    F : ndarray, shape (3, 3)
+        The ZOH transition with the x3 row ``[0, 0, 1]`` (as :func:`discretize`).
+    Fd : ndarray, shape (3, 3)
+        ``(F - I)/dt`` (1/s).
+    """
+    dt = _check_dt(dt)
+    F = np.array(discretize(params, dt).F)
+    return F, _delta_form(params.a1, params.a2, dt).copy()
+
+
+@functools.lru_cache(maxsize=256)
+def _delta_form(a1: float, a2: float, dt: float) -> np.ndarray:
+    from scipy.linalg import expm
+
+    w0 = math.sqrt(a1)
+    Az = np.array([[0.0, w0, 0.0], [-w0, -a2, -w0], [0.0, 0.0, 0.0]])
+    M = np.zeros((6, 6))
+    M[:3, :3] = Az * dt
+    M[:3, 3:] = np.eye(3)
+    phi1 = expm(M)[:3, 3:]
+    Fdz = Az @ phi1
+    s = np.array([1.0, 1.0 / w0, 1.0])  # z = S x
+    Fd = Fdz * s[None, :] / s[:, None]
+    Fd[2] = 0.0
+    Fd.setflags(write=False)
+    return Fd
+
+
 def discrete_gains(params: BoucWenParams, gains: Any, dt: float) -> np.ndarray:
     """Discrete correction ``K`` whose error poles are ``exp(lambda_i dt)``.
 
-    ``lambda_i`` are the eigenvalues of ``A0 - l C``. Ackermann's formula for
-    the pair ``(F, C F)`` places the eigenvalues of ``(I - K C) F``; it is
-    evaluated with ``x2`` scaled by ``sqrt(a1)`` so the 3x3 problem is well
-    conditioned for a1 from 1e3 to 1e9, and it handles repeated poles.
+    ``lambda_i`` are the eigenvalues of ``A0 - l C``. The poles are placed in
+    the delta form ``((I - K C) F - I)/dt = (F - I)/dt - (K/dt) C F`` at
+    ``(exp(lambda_i dt) - 1)/dt`` (both sides accurate to round-off, see
+    :func:`delta_transition`), with Ackermann's formula in the coordinates
+    ``(x1, x2/sqrt(a1), x3)`` and time in units of ``1/sqrt(a1)``. In that form
+    the matrices are of order one for every ``|lambda| dt``; Ackermann's
+    formula on ``F`` itself (which tends to ``I`` as ``dt -> 0``) cancels
+    catastrophically when ``|lambda| dt`` is small. When no pole is near
+    ``z = 1`` (every ``|z_i - 1| > 0.5``) the z form is used instead, which keeps
+    poles close to ``z = 0`` that the delta form would round to ``-1/dt``.
 
     Parameters
     ----------
@@ -105,12 +166,25 @@ def discrete_gains(params: BoucWenParams, gains: Any, dt: float) -> np.ndarray:
     -------
     ndarray, shape (3,)
     """
-    lam = np.linalg.eigvals(error_matrix(params, gains))
-    return place_discrete(params, np.exp(lam * _check_dt(dt)), dt)
+    dt = _check_dt(dt)
+    w0 = math.sqrt(params.a1)
+    T = np.array([1.0, w0, 1.0])
+    A = error_matrix(params, gains)
+    lam = np.linalg.eigvals(A * T[None, :] / T[:, None] / w0) * w0
+    zm1 = _expm1_complex(lam * dt)
+    if float(np.min(np.abs(zm1))) > Z_FORM_BELOW:
+        # no pole near z = 1: F is far from I and the z form keeps the small |z_i|
+        # (which the delta form would round to -1/dt)
+        return _place_z(params, np.exp(lam * dt), dt)
+    return _place_delta(params, zm1 / dt, dt)
 
 
-def place_discrete(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.ndarray:
-    """``K`` with eig((I - K C) F) = ``poles`` (a self-conjugate set of three)."""
+#: Poles are placed in the z form when every ``|z_i - 1|`` exceeds this (else delta form).
+Z_FORM_BELOW = 0.5
+
+
+def _place_z(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.ndarray:
+    """Ackermann's formula for ``(F, C F)`` in the coordinates ``(x1, x2/sqrt(a1), x3)``."""
     F = discretize(params, dt).F
     w0 = math.sqrt(params.a1)
     s = np.array([1.0, 1.0 / w0, 1.0])  # z = S x
@@ -126,3 +200,55 @@ def place_discrete(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.nd
             f"the sampled model is not observable at dt = {dt:g} s; choose another dt"
         ) from None
     return Kz / s
+
+
+def place_discrete(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.ndarray:
+    """``K`` with eig((I - K C) F) = ``poles`` (a self-conjugate set of three)."""
+    dt = _check_dt(dt)
+    z = np.asarray(poles, dtype=complex).ravel()
+    return _place_delta(params, (z - 1.0) / dt, dt)
+
+
+def _place_delta(params: BoucWenParams, deltas: np.ndarray, dt: float) -> np.ndarray:
+    """``K`` with eig(((I - K C) F - I)/dt) = ``deltas`` (1/s), by Ackermann in delta form."""
+    F, Fd = delta_transition(params, dt)
+    w0 = math.sqrt(params.a1)
+    s = np.array([1.0, 1.0 / w0, 1.0])  # z = S x
+    Az = Fd * s[:, None] / s[None, :] / w0  # (F - I)/dt in z, time in 1/w0
+    Hz = (C @ F) / s
+    O = np.vstack([Hz, Hz @ Az, Hz @ Az @ Az])
+    coeffs = np.real(np.poly(np.asarray(deltas, dtype=complex) / w0))
+    pA = coeffs[0] * Az @ Az @ Az + coeffs[1] * Az @ Az + coeffs[2] * Az + coeffs[3] * np.eye(3)
+    try:
+        g = pA @ np.linalg.solve(O, np.array([0.0, 0.0, 1.0]))
+    except np.linalg.LinAlgError:
+        raise GainError(
+            f"the sampled model is not observable at dt = {dt:g} s; choose another dt"
+        ) from None
+    return dt * w0 * g / s
+
+
+def schur_margin(params: BoucWenParams, K: Any, dt: float) -> tuple[float, np.ndarray]:
+    """Stability of the nominal discrete error dynamics ``(I - K C) F``.
+
+    Computed in delta form: with ``delta_i`` the eigenvalues of
+    ``(F - I)/dt - (K/dt) C F``, the poles are ``z_i = 1 + dt delta_i`` and
+    ``|z_i|^2 - 1 = dt (2 Re delta_i + dt |delta_i|^2)``, evaluated without
+    cancelling against 1.
+
+    Returns
+    -------
+    margin : float
+        ``max_i (|z_i|^2 - 1)``; the dynamics are Schur stable when it is < 0.
+    z : ndarray, shape (3,)
+        The poles ``z_i``.
+    """
+    dt = _check_dt(dt)
+    F, Fd = delta_transition(params, dt)
+    K = _as_gains(K, "discrete gains K")
+    w0 = math.sqrt(params.a1)
+    T = np.array([1.0, w0, 1.0])
+    Ad = Fd - np.outer(K / dt, F[0])
+    d = np.linalg.eigvals(Ad * T[None, :] / T[:, None] / w0) * w0
+    margin = float(np.max(dt * (2.0 * d.real + dt * np.abs(d) ** 2)))
+    return margin, 1.0 + dt * d
