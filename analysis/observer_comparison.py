@@ -383,7 +383,7 @@ def _run(args: argparse.Namespace, out: Path) -> int:
     (out / "observers.md").write_text(md)
     meta["cases"] = {c.key: c.describe for c in cases}
     (out / "observers.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1))
-    log(f"wrote {out}/observers.md, observers.json and {len(files)} figures "
+    log(f"wrote {args.out}/observers.md, observers.json and {len(files)} figures "
         f"in {time.perf_counter() - t_start:.0f} s")  # fmt: skip
     return 0
 

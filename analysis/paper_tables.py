@@ -176,7 +176,7 @@ def save(fig: Any, path: Path) -> None:
     from bwdesign.plotting.figures import save_figure
 
     save_figure(fig, path)
-    log(f"wrote {path}")
+    log(f"wrote {path.name}")
 
 
 # -- the report ------------------------------------------------------------------------
@@ -835,11 +835,11 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         "",
     ]
     (out / "paper_tables.md").write_text("\n".join(md))
-    log(f"wrote {out / 'paper_tables.md'}")
+    log(f"wrote {args.out}/paper_tables.md")
     from bwdesign.output.jsonenc import json_safe
 
     (out / "paper_tables.json").write_text(json.dumps(json_safe(doc), indent=1))
-    log(f"wrote {out / 'paper_tables.json'}")
+    log(f"wrote {args.out}/paper_tables.json")
     return 0
 
 
