@@ -242,7 +242,11 @@ def test_the_wheel_installs_and_does_the_main_job_outside_the_repository(dists, 
     first, rest = (work / "stage.toml").read_text().split("\n", 1)
     assert first.startswith("# written by bwdesign") and rest == starter_config()
     again = _run([bw, "init", "stage.toml"], cwd=work, env=env, check=False)
-    assert again.returncode == 2 and again.stderr.startswith("error: stage.toml already exists")
+    assert (
+        again.returncode == 2
+        and again.stderr.startswith("error: ")
+        and "already exists; not overwritten" in again.stderr
+    )
     for config, out_dir in (("stage.toml", "report"), ("paper_experiment", "preset")):
         run = _run(
             [bw, "report", "--config", config, "--out", out_dir, "--quiet"], cwd=work, env=env

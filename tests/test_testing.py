@@ -23,7 +23,7 @@ from bwdesign.testing import (
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "firmware_repo"
 STAGE = EXAMPLE / "stage.toml"
-#: barely Hurwitz gains: the sampled tier holds only up to 34 V/s, the envelope is 397
+#: barely Hurwitz gains: the sampled tier holds only up to 34.0 V/s, the envelope is 397
 UNCERTIFIED = "gains = [8.0, 64.0, -745.0]"
 
 
@@ -49,7 +49,7 @@ def test_helpers_fail_with_a_readable_table(tmp_path):
     msg = str(info.value)
     assert msg.splitlines()[0] == "stage.toml: gains not certified"
     assert re.search(r"FAIL\s+certified\s+any\s+None\s+some tier needed at \|u'\| <= 396\.9", msg)
-    assert "sampled up to 33.96 V/s" in msg
+    assert "sampled up to 34.01 V/s" in msg
     with pytest.raises(AssertionError, match=r"FAIL\s+max_me_um\s+0\.01\s+0\.1327"):
         assert_tracks(STAGE, max_me=0.01)
     with pytest.raises(AssertionError, match="synthesis infeasible"):

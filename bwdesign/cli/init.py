@@ -95,6 +95,19 @@ _SPEC: dict[str, list[tuple[str, str, str | None]]] = {
         (k, "{ rel = 0.02 } (fraction of the nominal) or { abs = x }; unlisted = exact", None)
         for k in MODEL_FIELDS
     ],
+    "sweep": [
+        ("samples", "number of scenarios the report's Monte Carlo section runs, > 0", None),
+        ("seed", "seed of the draw, >= 0 (default 0)", None),
+        ("observers", '["phso", "eso"]: the observers compared', None),
+        (
+            "tuning",
+            '"config" ([observer] and [controller]) or "digital" (the digital tuning)',
+            None,
+        ),
+        ("noise_std_um", "um: sensor noise std, >= 0 (default 0)", None),
+        ("duration_s", "s: per scenario (default three reference periods, at least 1 s)", None),
+        ("distribution", '"uniform" in the box, or "normal" (half-widths as 95 % intervals)', None),
+    ],
     # one source: the requirements schema (bwdesign check, bwdesign.testing)
     "requirements": [(k, meaning, None) for k, (_, meaning) in REQUIREMENT_KEYS.items()]
     + [(k, meaning, None) for k, (_, meaning) in SETTING_KEYS.items()],
@@ -113,6 +126,7 @@ _HEADINGS = {
     "reference": "the trajectory to track (the report needs it)",
     "synthesis": "what the report asks of the gain synthesis (optional)",
     "uncertainty": "parameter half-widths: the sweep's box, the requirements' corners (optional)",
+    "sweep": "a Monte Carlo sweep over [uncertainty] in the report (optional; needs it)",
     "requirements": "what `bwdesign check` and your CI demand of the stage (optional)",
 }
 _SECTION_ORDER = (
@@ -124,6 +138,7 @@ _SECTION_ORDER = (
     "envelope",
     "synthesis",
     "uncertainty",
+    "sweep",
     "requirements",
 )
 
@@ -136,8 +151,10 @@ def _toml(value: Any) -> str:
         return repr(value)
     if isinstance(value, str):
         return json.dumps(value)
-    if isinstance(value, list):
+    if isinstance(value, list | tuple):
         return "[" + ", ".join(_toml(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
     raise ConfigError(f"cannot write {value!r} as a starter value")
 
 

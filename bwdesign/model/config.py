@@ -168,12 +168,20 @@ def _check_keys(table: Any, section: str, allowed: set[str]) -> dict[str, Any]:
     return table
 
 
-def _sweep(table: Any) -> dict[str, Any]:
+def _sweep(table: Any) -> dict[str, Any] | None:
     """``[sweep]``: a small Monte Carlo sweep over ``[uncertainty]`` in the report."""
     t = _check_keys(table, "sweep", _SECTIONS["sweep"])
+    if not t:  # an empty section asks for nothing, as for [requirements] and [uncertainty]
+        return None
     if "samples" not in t:
         raise ConfigError("[sweep]: missing key samples (number of scenarios, > 0)")
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = {
+        "seed": 0,
+        "observers": ("phso", "eso"),
+        "tuning": "config",
+        "noise_std_um": 0.0,
+        "distribution": "uniform",
+    }
     for key in ("samples", "seed"):
         if key in t:
             v = t[key]
