@@ -81,8 +81,13 @@ def hysteresis_increment_batch(alpha, beta, gamma, h, u0, u1):
     """:func:`bwdesign.hysteresis_increment` over arrays (parameters may be arrays too).
 
     The same closed form and the same float operations per element; each element
-    evaluates only the branch it ends on (one ``expm1`` and one ``exp``).
+    evaluates only the branch it ends on (one ``expm1`` and one ``exp``). The rare
+    special cases (``beta = gamma``, a vanishing exponent) are patched by mask, so
+    the common path costs no second evaluation.
     """
+    h, u0, u1 = np.broadcast_arrays(
+        *(np.atleast_1d(np.asarray(v, dtype=float)) for v in (h, u0, u1))
+    )
     with np.errstate(all="ignore"):
         du = u1 - u0
         s = np.copysign(1.0, du)
@@ -90,17 +95,27 @@ def hysteresis_increment_batch(alpha, beta, gamma, h, u0, u1):
         w = np.abs(du)
         cm = beta - gamma
         arg = -cm * g / alpha
-        wz = np.where(cm == 0.0, -g / alpha, np.where(arg > -1.0, np.log1p(arg) / cm, np.inf))
+        wz = np.log1p(arg) / cm
+        wz[~(arg > -1.0)] = np.inf
+        flat = cm == 0.0
+        if np.any(flat):
+            wz = np.where(flat, -g / alpha, wz)
         neg = g < 0.0
         first = neg & (w <= wz)
         cross = neg & ~first
         c = np.where(first, cm, beta + gamma)
-        g = np.where(cross, 0.0, g)
+        g[cross] = 0.0  # g = s * h is this call's own array
         w = np.where(cross, w - wz, w)
         x = c * w
-        frac = np.where(np.abs(x) < 1e-8, 1.0 - x / 2.0 + x * x / 6.0, -np.expm1(-x) / x)
+        frac = -np.expm1(-x) / x
+        small = np.abs(x) < 1e-8
+        if small.any():
+            xs = x[small]
+            frac[small] = 1.0 - xs / 2.0 + xs * xs / 6.0
         out = s * (g * np.exp(-x) + alpha * w * frac)
-        return np.where(du == 0.0, h, out)
+        still = du == 0.0
+        out[still] = h[still]
+        return out
 
 
 def _zoh_batch(a1: np.ndarray, a2: np.ndarray, a3: np.ndarray, dt: float) -> np.ndarray:
@@ -286,7 +301,7 @@ def simulate_batch(
     sum_abs = np.zeros(N)
     sum_sq = np.zeros(N)
     max_abs = np.zeros(N)
-    est_sq = np.zeros((N, 3))
+    est_sq = [np.zeros(N), np.zeros(N), np.zeros(N)]  # one contiguous array per state
     count = 0
 
     def law(a, b, c, i):
@@ -320,10 +335,10 @@ def simulate_batch(
                 a = np.abs(e)
                 sum_abs += a
                 sum_sq += e * e
-                np.maximum(max_abs, np.where(np.isnan(a), np.inf, a), out=max_abs)
-                for col, (hh_, xx_) in enumerate(((h1, x1), (h2, x2), (h3, x3))):
+                np.maximum(max_abs, a, out=max_abs)  # NaN propagates: unstable, masked below
+                for acc, hh_, xx_ in zip(est_sq, (h1, h2, h3), (x1, x2, x3), strict=True):
                     d = hh_ - xx_
-                    est_sq[:, col] += d * d
+                    acc += d * d
                 count += 1
             if not delay:
                 applied = law(h1, h2, h3, k)
@@ -368,7 +383,7 @@ def simulate_batch(
     me = np.where(stable, sum_abs / count, np.nan)
     rmse = np.where(stable, np.sqrt(sum_sq / count), np.nan)
     maxe = np.where(stable, max_abs, np.nan)
-    est = np.where(stable[:, None], np.sqrt(est_sq / count), np.nan)
+    est = np.where(stable[:, None], np.sqrt(np.stack(est_sq, axis=1) / count), np.nan)
     settings = {
         "plant": params.name,
         "reference": reference.to_dict(),
