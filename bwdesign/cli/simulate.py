@@ -34,6 +34,7 @@ from .args import (
     add_plant_args,
     finite_float,
     gains_triple,
+    integer,
     nonneg_float,
     positive_float,
 )
@@ -42,13 +43,6 @@ from .stage import Stage, load_stage
 __all__ = ["simulate_args", "run_simulate"]
 
 MAX_SAMPLES = 20_000_000
-
-
-def _int(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
 
 
 def simulate_args(p: argparse.ArgumentParser) -> None:
@@ -138,7 +132,7 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         metavar="S",
         help="measurement noise std (plant length unit)",
     )
-    p.add_argument("--seed", type=_int, default=0, metavar="N", help="noise seed (default 0)")
+    p.add_argument("--seed", type=integer, default=0, metavar="N", help="noise seed (default 0)")
     p.add_argument("--delay", action="store_true", help="one-sample computation delay")
     p.add_argument(
         "--start-on-reference",

@@ -27,29 +27,9 @@ from ..sim.sweep import (
     run_sweep,
     spec_from_config,
 )
-from .args import EXIT_NO, EXIT_OK, nonneg_float, positive_float
+from .args import EXIT_NO, EXIT_OK, nonneg_float, nonneg_int, positive_float, positive_int
 
 __all__ = ["sweep_args", "run_sweep_command", "parse_uncertainty"]
-
-
-def _count(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"expected an integer > 0, got {v}")
-    return v
-
-
-def _nonneg_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
-    return v
 
 
 def parse_uncertainty(text: str) -> dict[str, tuple[str, float]]:
@@ -79,7 +59,9 @@ def parse_uncertainty(text: str) -> dict[str, tuple[str, float]]:
 def sweep_args(p: argparse.ArgumentParser) -> None:
     """Arguments of ``bwdesign sweep``."""
     p.add_argument("--config", required=True, metavar="STAGE.toml", help="stage configuration")
-    p.add_argument("--samples", required=True, type=_count, metavar="N", help="scenarios (> 0)")
+    p.add_argument(
+        "--samples", required=True, type=positive_int, metavar="N", help="scenarios (> 0)"
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument(
         "--uncertainty",
@@ -88,7 +70,7 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
         " default: the config's [uncertainty] section",
     )
     p.add_argument("--distribution", choices=("uniform", "normal"), default="uniform")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="seed of the draw (>= 0)")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the draw (>= 0)")
     p.add_argument("--observers", default="phso,eso", help="observers to run (default phso,eso)")
     p.add_argument(
         "--tuning",
@@ -126,7 +108,7 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
-        type=_nonneg_int,
+        type=nonneg_int,
         default=None,
         metavar="K",
         help="local Dask worker processes (default: one per CPU; 0: in this process)",
@@ -139,7 +121,7 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--chunk-size",
-        type=_count,
+        type=positive_int,
         default=1000,
         metavar="M",
         help="scenarios per task (default 1000)",
