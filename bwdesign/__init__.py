@@ -33,7 +33,11 @@ from .model.plant import hysteresis_increment, simulate_zoh, zoh_step
 from .model.references import Sine, Step, Triangle
 from .model.stage_presets import stage_presets
 from .model.uncertainty import UncertaintyBox
-from .observers.sampled import ExtendedStateObserver, HysteresisObserver
+from .observers.sampled import (
+    DisturbanceHysteresisObserver,
+    ExtendedStateObserver,
+    HysteresisObserver,
+)
 from .observers.ukf import UnscentedObserver
 from .sim.closed_loop import simulate
 from .sim.continuous import simulate_continuous
@@ -63,6 +67,7 @@ __all__ = [
     "tracking_metrics",
     "steady_state_window",
     "HysteresisObserver",
+    "DisturbanceHysteresisObserver",
     "ExtendedStateObserver",
     "UnscentedObserver",
     "hysteresis_increment",
