@@ -5,6 +5,7 @@ modules whose contents may change.
 """
 
 from ._version import __version__
+from .certify.disturbance import LumpedCertificate, certify_disturbance
 from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
 from .certify.synthesis import synthesize
@@ -98,6 +99,8 @@ __all__ = [
     "CExport",
     "certify",
     "certify_discrete",
+    "certify_disturbance",
+    "LumpedCertificate",
     "synthesize",
     "CertificateReport",
     "TierCertificate",
