@@ -89,3 +89,23 @@ def test_real_observer_follows_the_certified_coordinates():
     # round-off floor: the plant states are ~100 um, their errors carry ~1e-13 um of noise
     assert np.all(np.diff(V) <= 1e-9 * V[:-1] + 1e-16 * V[0])
     assert np.abs(xi[-1, :3]).max() < 1e-3 * np.abs(xi[0, :3]).max()
+
+
+def test_synthesis_certified_and_runs():
+    from bwdesign.certify import synthesize_disturbance
+
+    K, cert, why = synthesize_disturbance(P0, udot_max=361.0, dt=DT, decay=100.0)
+    assert why == "certified" and cert.holds and K[2] == 0.0
+    ok, _ = verify_disturbance(P0, cert.P, udot_max=361.0, dt=DT, discrete=K)
+    assert ok
+    # the synthesised observer tracks the lumped hysteresis of a mismatched plant
+    true = P0.replace(a1=P0.a1 * 1.02, a3=P0.a3 * 0.98, gamma=P0.gamma * 1.1)
+    t = np.arange(0, 1.0, DT)
+    u = 70 + 40 * np.sin(2 * np.pi * t)
+    X = simulate_zoh(true, u, DT, x0=np.zeros(3))
+    est = DisturbanceHysteresisObserver(P0, discrete=K, dt=DT).batch_filter(X[1:, 0], u)
+    tail = slice(-1000, None)
+    assert np.abs(est[tail, 0] - X[1:][tail, 0]).max() < 1e-3 * np.abs(X[1:, 0]).max()
+    # beta < |gamma|: refused with the reason
+    K2, _, why2 = synthesize_disturbance(P0.replace(beta=0.01), udot_max=361.0, dt=DT)
+    assert K2 is None and "beta < |gamma|" in why2

@@ -3,7 +3,12 @@ the linear analysis of the error dynamics.
 """
 
 from .checks import continuous_equivalent, rho_interval, sector_interval
-from .disturbance import LumpedCertificate, certify_disturbance, verify_disturbance
+from .disturbance import (
+    LumpedCertificate,
+    certify_disturbance,
+    synthesize_disturbance,
+    verify_disturbance,
+)
 from .linear import (
     ErrorDynamics,
     HysteresisBode,
@@ -40,4 +45,5 @@ __all__ = [
     "LumpedCertificate",
     "certify_disturbance",
     "verify_disturbance",
+    "synthesize_disturbance",
 ]

@@ -65,7 +65,12 @@ from ..observers.gains import (
 from .checks import _negdef, _posdef, rho_interval, sector_interval
 from .results import Margin
 
-__all__ = ["LumpedCertificate", "certify_disturbance", "verify_disturbance"]
+__all__ = [
+    "LumpedCertificate",
+    "certify_disturbance",
+    "verify_disturbance",
+    "synthesize_disturbance",
+]
 
 _EW, _ETA = 2, 3
 
@@ -329,3 +334,80 @@ def verify_disturbance(
         raise InputError(f"P must be a finite 4x4 matrix, got shape {P.shape}")
     margins = _check(pr, P)
     return all(m.passed for m in margins), margins
+
+
+def synthesize_disturbance(
+    params: BoucWenParams, *, udot_max: float, dt: float, decay: float = 100.0
+) -> tuple[np.ndarray | None, LumpedCertificate | None, str]:
+    """Discrete PHDO gains ``K = (k1, k2, 0, k4)`` by LMI synthesis, then certified.
+
+    The split is ``l3 = 0`` (the whole lumped correction into ``d``, as the digital
+    tuning's PHDO gains), which makes the program an LMI in ``(P_o, p, Y = P_o K_o)``
+    (:func:`bwdesign.certify.lmi.lumped_sampled_synthesis`): the nominal observable
+    part decays at least at ``decay`` (``r = exp(-decay dt)``) and the lumped-error
+    certificate of the sampled tier holds at ``|u'| <= udot_max``. The gains are then
+    re-certified from scratch by :func:`certify_disturbance` (solver and outside check):
+    only that verdict counts.
+
+    Parameters
+    ----------
+    params : BoucWenParams
+    udot_max : float
+        Input-rate bound (input unit/s).
+    dt : float
+        Sample time (s).
+    decay : float
+        Nominal decay rate of the observable error (1/s, > 0).
+
+    Returns
+    -------
+    (K, certificate, reason)
+        ``K`` (shape (4,)) and its certificate when certified, else ``(None, None or the
+        failed certificate, reason)``.
+    """
+    from . import lmi
+
+    dt = _check_dt(dt)
+    decay = float(decay)
+    if not (math.isfinite(decay) and decay > 0):
+        raise InputError(f"decay must be a finite rate > 0 (1/s), got {decay}")
+    udot_max = float(udot_max)
+    if not (math.isfinite(udot_max) and udot_max >= 0):
+        raise InputError(f"udot_max must be a finite rate >= 0 (V/s), got {udot_max}")
+    rho_lo, rho_hi = rho_interval(params, udot_max, dt)
+    if rho_hi > 1.0:
+        return (
+            None,
+            None,
+            (
+                f"not synthesised: beta < |gamma| gives jump slopes up to {rho_hi:.6g} > 1 "
+                "(the hysteresis error can grow); no lumped-error certificate exists"
+            ),
+        )
+    s = _scale(params)[:3]
+    F = np.array(discretize(params, dt).F)
+    Fs = F * s[:, None] / s[None, :]
+    hs = F[0] / s
+    J = None if rho_lo == 1.0 else np.eye(4) - (rho_lo - 1.0) * _B(0.0)
+    sol = lmi.lumped_sampled_synthesis(Fs, hs, J, r=math.exp(-decay * dt))
+    if not sol.ok:
+        return None, None, f"solver failed: {sol.status} ({'; '.join(sol.attempts)})"
+    if not float(sol["t"]) > 0:
+        return None, None, f"infeasible: no strictly feasible point (t = {float(sol['t']):.3g})"
+    Ks = np.linalg.solve(np.asarray(sol["Po"]), np.asarray(sol["Y"]).ravel())
+    Ko = Ks / s
+    K = np.array([Ko[0], Ko[1], 0.0, Ko[2]])
+    cert = certify_disturbance(params, udot_max=udot_max, dt=dt, discrete=K)
+    if not cert.holds:
+        return None, cert, f"the synthesised gains failed the re-certification: {cert.status}"
+    margin_poles = np.abs(np.linalg.eigvals(F - np.outer(Ko, F[0])))
+    if not margin_poles.max() <= math.exp(-decay * dt) * (1 + 1e-9):
+        return (
+            None,
+            cert,
+            (
+                f"the synthesised gains miss the decay: pole radius {margin_poles.max():.6g} > "
+                f"exp(-decay dt) = {math.exp(-decay * dt):.6g}"
+            ),
+        )
+    return K, cert, "certified"

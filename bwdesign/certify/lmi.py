@@ -54,6 +54,7 @@ __all__ = [
     "sampled_synthesis",
     "solver_versions",
     "lumped_margin",
+    "lumped_sampled_synthesis",
 ]
 
 #: Solvers tried in this order; the first ``OPTIMAL`` answer is used.
@@ -635,3 +636,38 @@ def lumped_margin(
     """
     prob, variables = _lumped_problem(A_o, list(vertices), discrete=discrete)
     return solve(prob, variables)
+
+
+def lumped_sampled_synthesis(
+    F: np.ndarray, h: np.ndarray, J: np.ndarray | None, *, r: float
+) -> LMISolution:
+    """Discrete gains for the disturbance observer's observable part (``l3 = 0`` split).
+
+    Variables ``P_o`` (3x3), ``p``, ``Y = P_o K_o`` and the margin ``t``; with
+    ``P_o Phi_o = P_o F - Y h'`` (``h' = C F``) every block is affine in them:
+
+    - nominal decay (``rho = 1``): ``[[r^2 P_o - t I, (P_o Phi_o)'], [P_o Phi_o, P_o]] >= 0``;
+    - the contracting vertex ``A_d = blockdiag(Phi_o, 1) J``:
+      ``[[P - t I, (blockdiag(P_o Phi_o, p) J)'], [blockdiag(P_o Phi_o, p) J, P]] >= 0``
+      (``J = None``: no such vertex);
+    - ``t I <= P_o <= I``, ``t <= p <= 1``. Maximises ``t``; ``K_o = P_o^-1 Y``.
+    """
+    F = np.asarray(F, float)
+    h = np.asarray(h, float).reshape(1, 3)
+    Po = cp.Variable((3, 3), symmetric=True, name="Po")
+    p = cp.Variable(name="p")
+    Y = cp.Variable((3, 1), name="Y")
+    t = cp.Variable(name="t")
+    PoPhi = Po @ F - Y @ h
+    cons = [Po >> t * _I3, Po << _I3, p >= t, p <= 1]
+    M = cp.bmat([[float(r) ** 2 * Po - t * _I3, PoPhi.T], [PoPhi, Po]])
+    cons.append(_sym(M) >> 0)
+    if J is not None:
+        z31 = np.zeros((3, 1))
+        pp = cp.reshape(p, (1, 1), order="C")
+        P = cp.bmat([[Po, z31], [z31.T, pp]])
+        PA = cp.bmat([[PoPhi, z31], [z31.T, pp]]) @ np.asarray(J, float)
+        M4 = cp.bmat([[P - t * np.eye(4), PA.T], [PA, P]])
+        cons.append(_sym(M4) >> 0)
+    prob = cp.Problem(cp.Maximize(t), cons)
+    return solve(prob, {"Po": Po, "p": p, "Y": Y, "t": t})
