@@ -264,18 +264,21 @@ class _SampledObserver:
         """
         u = _finite_scalar(u, "u")
         xs = self._x.tolist()
-        self._finite(xs)
-        x1, x2, x3 = xs[0], xs[1], xs[2]
+        if self._n == 3:
+            x1, x2, x3 = xs
+            if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
+                _require_finite_state(self._x, type(self).__name__)
+            d = None
+        else:
+            self._finite(xs)
+            x1, x2, x3, d = xs
         if self._hysteresis:
             x3 = hysteresis_increment(self.params, x3, self.u_prev, u)
-        w = x3 if self._n == 3 else x3 + xs[3]
+        w = x3 if d is None else x3 + d
         f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
-        prior = [
-            f11 * x1 + f12 * x2 + f13 * w + g1 * u,
-            f21 * x1 + f22 * x2 + f23 * w + g2 * u,
-            x3,
-            *xs[3:],
-        ]
+        x1n = f11 * x1 + f12 * x2 + f13 * w + g1 * u
+        x2n = f21 * x1 + f22 * x2 + f23 * w + g2 * u
+        prior = (x1n, x2n, x3) if d is None else (x1n, x2n, x3, d)
         self._x = np.array(prior)
         self.x_prior = np.array(prior)
         self.u_prev = u
@@ -295,9 +298,17 @@ class _SampledObserver:
             return
         z = _finite_scalar(z, "z")
         xs = self._x.tolist()
-        self._finite(xs)
-        r = z - xs[0]
-        post = [xi + ki * r for xi, ki in zip(xs, self.K.tolist(), strict=True)]
+        if self._n == 3:
+            x1, x2, x3 = xs
+            if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
+                _require_finite_state(self._x, type(self).__name__)
+            k1, k2, k3 = self.K.tolist()
+            r = z - x1
+            post = (x1 + k1 * r, x2 + k2 * r, x3 + k3 * r)
+        else:
+            self._finite(xs)
+            r = z - xs[0]
+            post = tuple(xi + ki * r for xi, ki in zip(xs, self.K.tolist(), strict=True))
         self.z = z
         self.y = r
         self._x = np.array(post)
