@@ -5,6 +5,7 @@ modules whose contents may change.
 """
 
 from ._version import __version__
+from .certify.disturbance import LumpedCertificate, certify_disturbance
 from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
 from .certify.synthesis import synthesize
@@ -33,7 +34,11 @@ from .model.plant import hysteresis_increment, simulate_zoh, zoh_step
 from .model.references import Sine, Step, Triangle
 from .model.stage_presets import stage_presets
 from .model.uncertainty import UncertaintyBox
-from .observers.sampled import ExtendedStateObserver, HysteresisObserver
+from .observers.sampled import (
+    DisturbanceHysteresisObserver,
+    ExtendedStateObserver,
+    HysteresisObserver,
+)
 from .observers.ukf import UnscentedObserver
 from .sim.closed_loop import simulate
 from .sim.continuous import simulate_continuous
@@ -63,6 +68,7 @@ __all__ = [
     "tracking_metrics",
     "steady_state_window",
     "HysteresisObserver",
+    "DisturbanceHysteresisObserver",
     "ExtendedStateObserver",
     "UnscentedObserver",
     "hysteresis_increment",
@@ -93,6 +99,8 @@ __all__ = [
     "CExport",
     "certify",
     "certify_discrete",
+    "certify_disturbance",
+    "LumpedCertificate",
     "synthesize",
     "CertificateReport",
     "TierCertificate",

@@ -427,7 +427,7 @@ BAD = [
         "iosystem-kind",
         lambda: observer_iosystem(preset("paper_experiment"), GAINS_EXP, kind="ekf"),
         ValueError,
-        "kind must be 'phso' or 'eso'",
+        "kind must be 'phso', 'eso' or 'phdo'",
     ),
     (
         "iosystem-gains",

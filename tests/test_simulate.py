@@ -352,7 +352,7 @@ def test_cli_unstable_is_exit_1(capsys):
 
 
 CLI_BAD = [
-    ("malformed gains", ["--gains", "1,2"], "three comma-separated gains"),
+    ("malformed gains", ["--gains", "1,2"], "comma-separated gains l1,l2,l3"),
     ("negative dt", ["--dt", "-1"], "--dt"),
     ("zero duration", ["--duration", "0"], "--duration"),
     ("negative noise", ["--noise-std", "-0.1"], "--noise-std"),

@@ -67,7 +67,7 @@ def test_hysteresis_batch_matches_scalar():
         np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-15)
 
 
-@pytest.mark.parametrize("observer", ["phso", "eso"])
+@pytest.mark.parametrize("observer", ["phso", "eso", "phdo"])
 @pytest.mark.parametrize(
     "label, kw",
     [
@@ -91,7 +91,7 @@ def test_batch_matches_simulate(tune, observer, label, kw):
         duration=1.0,
         controller=ctl,
         observer=observer,
-        gains=tune.gains,
+        gains=tune.observer_gains_for(observer),
         noise_std=0.02,
         seeds=seeds,
         **kw,
@@ -104,7 +104,7 @@ def test_batch_matches_simulate(tune, observer, label, kw):
             duration=1.0,
             controller=ctl,
             observer=observer,
-            gains=tune.gains,
+            gains=tune.observer_gains_for(observer),
             true_params=tp,
             noise_std=0.02,
             seed=int(seeds[i]),

@@ -3,6 +3,12 @@ the linear analysis of the error dynamics.
 """
 
 from .checks import continuous_equivalent, rho_interval, sector_interval
+from .disturbance import (
+    LumpedCertificate,
+    certify_disturbance,
+    synthesize_disturbance,
+    verify_disturbance,
+)
 from .linear import (
     ErrorDynamics,
     HysteresisBode,
@@ -36,4 +42,8 @@ __all__ = [
     "hinf_norm",
     "hysteresis_bode",
     "lipschitz_envelope",
+    "LumpedCertificate",
+    "certify_disturbance",
+    "verify_disturbance",
+    "synthesize_disturbance",
 ]

@@ -53,6 +53,8 @@ __all__ = [
     "sector_synthesis",
     "sampled_synthesis",
     "solver_versions",
+    "lumped_margin",
+    "lumped_sampled_synthesis",
 ]
 
 #: Solvers tried in this order; the first ``OPTIMAL`` answer is used.
@@ -585,3 +587,87 @@ def sampled_synthesis(
     if refine:
         values["t_min"] = float(t_min)
     return _run(prog, values, first_only=True)
+
+
+# -- the disturbance observer's lumped error (bwdesign.certify.disturbance) ----------
+
+
+def _lumped_problem(
+    A_o: np.ndarray, vertices: list[np.ndarray], *, discrete: bool
+) -> tuple[cp.Problem, dict[str, cp.Variable]]:
+    """``P = blockdiag(P_o, p)`` with a margin ``t`` on the observable block and the vertices.
+
+    Continuous: ``He(P_o A_o) <= -t I`` and ``He(P A_i) <= -t I``; discrete (Schur
+    form): ``A_o' P_o A_o <= P_o - t I`` and ``A_i' P A_i <= P - t I``; ``t <= p``,
+    ``t I <= P_o <= I``, ``p <= 1``.
+    """
+    Po = cp.Variable((3, 3), symmetric=True, name="Po")
+    p = cp.Variable(name="p")
+    t = cp.Variable(name="t")
+    P = cp.bmat([[Po, np.zeros((3, 1))], [np.zeros((1, 3)), cp.reshape(p, (1, 1), order="C")]])
+    cons = [Po >> t * _I3, Po << _I3, p >= t, p <= 1]
+
+    def neg(Pm, A, n):
+        if discrete:
+            PA = Pm @ A
+            M = cp.bmat([[Pm - t * np.eye(n), PA.T], [PA, Pm]])
+            return _sym(M) >> 0
+        PA = Pm @ A
+        return _sym(PA + PA.T) << -t * np.eye(n)
+
+    if A_o is not None:
+        cons.append(neg(Po, np.asarray(A_o, float), 3))
+    for A in vertices:
+        cons.append(neg(P, np.asarray(A, float), 4))
+    return cp.Problem(cp.Maximize(t), cons), {"Po": Po, "p": p, "t": t}
+
+
+def lumped_margin(
+    A_o: np.ndarray | None, vertices: list[np.ndarray], *, discrete: bool
+) -> LMISolution:
+    """A block-diagonal Lyapunov function for the disturbance observer's error.
+
+    In the coordinates ``(e1, e2, ew, eta)`` (scaled) the error matrix at the
+    degenerate vertex (hysteresis not contracting: sector ``k = 0`` or jump slope
+    ``rho = 1``) is ``blockdiag(A_o, 0)`` (continuous) or ``blockdiag(A_o, 1)``
+    (discrete): only its observable block ``A_o`` is constrained there. The other
+    vertices ``A_i`` (4x4) are constrained in full. Maximises the margin ``t``
+    (see the module conventions); ``A_o = None`` when no vertex is degenerate.
+    """
+    prob, variables = _lumped_problem(A_o, list(vertices), discrete=discrete)
+    return solve(prob, variables)
+
+
+def lumped_sampled_synthesis(
+    F: np.ndarray, h: np.ndarray, J: np.ndarray | None, *, r: float
+) -> LMISolution:
+    """Discrete gains for the disturbance observer's observable part (``l3 = 0`` split).
+
+    Variables ``P_o`` (3x3), ``p``, ``Y = P_o K_o`` and the margin ``t``; with
+    ``P_o Phi_o = P_o F - Y h'`` (``h' = C F``) every block is affine in them:
+
+    - nominal decay (``rho = 1``): ``[[r^2 P_o - t I, (P_o Phi_o)'], [P_o Phi_o, P_o]] >= 0``;
+    - the contracting vertex ``A_d = blockdiag(Phi_o, 1) J``:
+      ``[[P - t I, (blockdiag(P_o Phi_o, p) J)'], [blockdiag(P_o Phi_o, p) J, P]] >= 0``
+      (``J = None``: no such vertex);
+    - ``t I <= P_o <= I``, ``t <= p <= 1``. Maximises ``t``; ``K_o = P_o^-1 Y``.
+    """
+    F = np.asarray(F, float)
+    h = np.asarray(h, float).reshape(1, 3)
+    Po = cp.Variable((3, 3), symmetric=True, name="Po")
+    p = cp.Variable(name="p")
+    Y = cp.Variable((3, 1), name="Y")
+    t = cp.Variable(name="t")
+    PoPhi = Po @ F - Y @ h
+    cons = [Po >> t * _I3, Po << _I3, p >= t, p <= 1]
+    M = cp.bmat([[float(r) ** 2 * Po - t * _I3, PoPhi.T], [PoPhi, Po]])
+    cons.append(_sym(M) >> 0)
+    if J is not None:
+        z31 = np.zeros((3, 1))
+        pp = cp.reshape(p, (1, 1), order="C")
+        P = cp.bmat([[Po, z31], [z31.T, pp]])
+        PA = cp.bmat([[PoPhi, z31], [z31.T, pp]]) @ np.asarray(J, float)
+        M4 = cp.bmat([[P - t * np.eye(4), PA.T], [PA, P]])
+        cons.append(_sym(M4) >> 0)
+    prob = cp.Problem(cp.Maximize(t), cons)
+    return solve(prob, {"Po": Po, "p": p, "Y": Y, "t": t})

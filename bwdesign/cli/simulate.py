@@ -11,6 +11,12 @@ With ``--plant FILE.toml`` the file's ``[observer]`` gains (PHSO and ESO),
 UKF's ``--udot-max``) are the defaults of the options not given; what was
 taken from the file is printed. An option that does not apply to the run is
 an error.
+
+``--tuning digital`` runs the loop with :func:`bwdesign.control.digital_tuning`
+chosen for the stage, ``--dt`` and ``--delay`` (observer gains for the chosen
+``--observer``, eq. (12) discrete form, lambdas, integral action); then
+``--gains``, ``--lambda1``, ``--lambda2``, ``--form`` and ``--integral-rate`` are
+errors, and the JSON's ``tuning`` says what was used.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ import math
 
 import numpy as np
 
+from ..control.tuning import digital_tuning
 from ..model.config import load_plant
 from ..model.references import Reference, Sine, Step, Triangle
 from ..output.files import FileTarget, prepare_file
@@ -33,7 +40,6 @@ from .args import (
     UsageError,
     add_plant_args,
     finite_float,
-    gains_triple,
     integer,
     nonneg_float,
     positive_float,
@@ -43,6 +49,25 @@ from .stage import Stage, load_stage
 __all__ = ["simulate_args", "run_simulate"]
 
 MAX_SAMPLES = 20_000_000
+
+
+def _gains(text: str) -> tuple[float, ...]:
+    """argparse type: three (phso, eso) or four (phdo) comma-separated finite gains."""
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) not in (3, 4):
+        raise argparse.ArgumentTypeError(
+            f"expected comma-separated gains l1,l2,l3 (or l1,l2,l3,l4 for phdo), got {text!r}"
+        )
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"gains must be numbers, got {text!r}") from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"gains must be finite, got {text!r}")
+    return values
+
+
+_N_GAINS = {"phso": 3, "eso": 3, "phdo": 4}
 
 
 def simulate_args(p: argparse.ArgumentParser) -> None:
@@ -90,15 +115,25 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         "--t-step", type=nonneg_float, default=None, metavar="S", help="step: time of the step (s)"
     )
     p.add_argument(
-        "--observer", choices=("phso", "eso", "ukf"), default="phso", help="observer (default phso)"
+        "--observer",
+        choices=("phso", "eso", "phdo", "ukf"),
+        default="phso",
+        help="observer (default phso; phdo: the hysteresis observer with a disturbance state)",
     )
     p.add_argument(
         "--gains",
-        type=gains_triple,
+        type=_gains,
         default=None,
-        metavar="l1,l2,l3",
-        help="continuous observer gains (1/s, 1/s^2, 1/s); required for phso and eso "
-        "(an error for ukf, which has none)",
+        metavar="l1,l2,l3[,l4]",
+        help="continuous observer gains (1/s, 1/s^2, 1/s[, 1/s]): three for phso and eso, four "
+        "for phdo; required unless --tuning digital (an error for ukf, which has none)",
+    )
+    p.add_argument(
+        "--tuning",
+        choices=("digital",),
+        default=None,
+        help="digital: gains, lambdas and integral action from bwdesign.control.digital_tuning "
+        "for this stage, --dt, --delay and --observer (no --gains, --lambda1, --lambda2)",
     )
     p.add_argument(
         "--udot-max",
@@ -223,6 +258,20 @@ def run_simulate(args: argparse.Namespace) -> int:
     stage = load_stage(args.plant)
     params = stage.params
     true_params = load_plant(args.true_plant) if args.true_plant else None
+    if args.tuning is not None:
+        given = [
+            f"--{o.replace('_', '-')}"
+            for o in ("gains", "lambda1", "lambda2", "integral_rate")
+            if getattr(args, o) is not None
+        ] + (["--form"] if args.form != "continuous" else [])
+        if given:
+            raise UsageError(
+                f"--tuning {args.tuning} chooses the gains and constants; drop {', '.join(given)}"
+            )
+        if args.observer == "ukf":
+            raise UsageError(
+                "--tuning digital applies to phso, eso and phdo (the UKF has no gains)"
+            )
     _file_defaults(args, stage)
     reference = _reference(args, stage)
     if args.observer == "ukf" and args.gains is not None:
@@ -232,8 +281,17 @@ def run_simulate(args: argparse.Namespace) -> int:
         )
     if args.observer != "ukf" and args.udot_max is not None:
         raise UsageError("--udot-max applies to --observer ukf only (the UKF's process noise)")
-    if args.observer in ("phso", "eso") and args.gains is None:
-        raise UsageError(f"--observer {args.observer} needs --gains l1,l2,l3")
+    if args.tuning is not None and args.dt is None:
+        raise UsageError("--dt is required (or a --plant FILE.toml that sets it)")
+    tuning = _tuning(args, params) if args.tuning is not None else None
+    if args.observer in _N_GAINS and args.gains is None:
+        names = ",".join(f"l{i + 1}" for i in range(_N_GAINS[args.observer]))
+        raise UsageError(f"--observer {args.observer} needs --gains {names} (or --tuning digital)")
+    if args.observer in _N_GAINS and len(args.gains) != _N_GAINS[args.observer]:
+        raise UsageError(
+            f"--observer {args.observer} takes {_N_GAINS[args.observer]} gains, got "
+            f"{len(args.gains)}: {','.join(f'{g:g}' for g in args.gains)}"
+        )
     for opt in ("lambda1", "lambda2", "dt", "duration"):
         if getattr(args, opt) is None:
             raise UsageError(
@@ -282,6 +340,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     doc["plant"] = params.to_dict()
     doc["reference"] = reference.to_dict()
     doc["observer"] = args.observer
+    doc["tuning"] = tuning
     doc["csv"] = str(target.path) if target else None
     doc["start"] = "on reference" if args.start_on_reference else "rest"
     doc["defaults_from_file"] = stage.to_dict()
@@ -299,19 +358,43 @@ def _file_defaults(args: argparse.Namespace, stage: Stage) -> None:
     cfg = stage.config
     if cfg is None:
         return
-    if args.observer in ("phso", "eso"):
+    if args.observer in ("phso", "eso") and args.tuning is None:
         args.gains = stage.default(args, "gains", "[observer]", cfg.gains)
     args.dt = stage.default(args, "dt", "[sampling]", cfg.dt)
     ctl = cfg.controller
-    if ctl is not None:
+    if ctl is not None and args.tuning is None:
         for opt in ("lambda1", "lambda2"):
             setattr(args, opt, stage.default(args, opt, "[controller]", getattr(ctl, opt)))
+    if ctl is not None:
         if args.u_min is None and args.u_max is None:
             args.u_min = stage.default(args, "u_min", "[controller]", ctl.u_min)
             args.u_max = stage.default(args, "u_max", "[controller]", ctl.u_max)
     if args.observer == "ukf" and args.udot_max is None and cfg.envelope_spec is not None:
         env = cfg.envelope(allow_unbounded=args.allow_unbounded)
         args.udot_max = stage.default(args, "udot_max", "[envelope]", env.udot_max)
+
+
+def _tuning(args: argparse.Namespace, params) -> dict:
+    """Set the gains and constants of ``args`` from the digital tuning; what was used, as JSON."""
+    tu = digital_tuning(params, args.dt, delay=args.delay)
+    kw = tu.controller_kwargs(observer=args.observer)
+    args.gains = tuple(float(g) for g in kw["gains"])
+    args.lambda1, args.lambda2 = float(kw["lambda1"]), float(kw["lambda2"])
+    args.form, args.integral_rate = kw["form"], kw["integral_rate"]
+    return {
+        "kind": args.tuning,
+        "observer": args.observer,
+        "gains": list(args.gains),
+        "lambda1": args.lambda1,
+        "lambda2": args.lambda2,
+        "form": args.form,
+        "integral_rate": args.integral_rate,
+        "observer_bandwidth": tu.observer_bandwidth,
+        "dt": tu.dt,
+        "delay": tu.delay,
+        "met": tu.met,
+        "reasoning": tu.reasoning,
+    }
 
 
 def _limits_from_file(stage: Stage) -> bool:

@@ -114,10 +114,27 @@ class DigitalTuning:
     candidates: list
     reasoning: str
 
-    def controller_kwargs(self) -> dict[str, Any]:
+    def observer_gains_for(self, observer: str = "phso") -> tuple[float, ...]:
+        """The continuous gains of this tuning for ``observer`` ("phso", "eso" or "phdo").
+
+        The PHSO and the ESO use ``gains``. The disturbance observer (PHDO) gets
+        ``(l1, l2, 0, l3)``: its observable part ``(x1, x2, x3 + d)`` has the same
+        poles as the tuned observer (so the loop analysed here is its loop too),
+        the whole correction of the lumped state goes to ``d`` and the hysteresis
+        copy runs on the model alone (``l3 = 0``, under which its lumped error
+        converges for every input; see :class:`bwdesign.DisturbanceHysteresisObserver`).
+        """
+        if observer == "phdo":
+            l1, l2, l3 = self.gains
+            return (l1, l2, 0.0, l3)
+        if observer not in ("phso", "eso"):
+            raise InputError(f"observer must be 'phso', 'eso' or 'phdo', got {observer!r}")
+        return tuple(self.gains)
+
+    def controller_kwargs(self, *, observer: str = "phso") -> dict[str, Any]:
         """Keywords for :func:`bwdesign.sim.simulate` (gains, lambdas, form, integral)."""
         return {
-            "gains": self.gains,
+            "gains": self.observer_gains_for(observer),
             "lambda1": self.lambda1,
             "lambda2": self.lambda2,
             "form": self.form,

@@ -4,7 +4,7 @@ baseline.
 
 from .dynamics import eso_rhs, eso_step, observer_iosystem, phso_rhs, phso_step
 from .gains import check_gains, discrete_gains, error_matrix
-from .sampled import ExtendedStateObserver, HysteresisObserver
+from .sampled import DisturbanceHysteresisObserver, ExtendedStateObserver, HysteresisObserver
 from .ukf import UnscentedObserver, default_noise, max_hysteresis_slope
 
 __all__ = [
@@ -18,6 +18,7 @@ __all__ = [
     "observer_iosystem",
     "HysteresisObserver",
     "ExtendedStateObserver",
+    "DisturbanceHysteresisObserver",
     "UnscentedObserver",
     "default_noise",
     "max_hysteresis_slope",

@@ -41,15 +41,18 @@ def _finite_scalar(v: Any, name: str) -> float:
     return f
 
 
-def _state(value: Any, name: str = "x") -> np.ndarray:
-    """A state as a new float array of shape (3,); (3,) and filterpy's (3, 1) are accepted."""
+_WORDS = {3: "three", 4: "four"}
+
+
+def _state(value: Any, name: str = "x", n: int = 3) -> np.ndarray:
+    """A state as a new float array of shape (n,); (n,) and filterpy's (n, 1) are accepted."""
     a = np.asarray(value)
-    if a.dtype.kind not in "fiu" or a.shape not in ((3,), (3, 1)):
+    if a.dtype.kind not in "fiu" or a.shape not in ((n,), (n, 1)):
         raise InputError(
-            f"{name} must be three finite numbers, shape (3,) or (3, 1), got "
+            f"{name} must be {_WORDS.get(n, n)} finite numbers, shape ({n},) or ({n}, 1), got "
             f"{type(value).__name__} {value!r}"
         )
-    x = a.astype(float).reshape(3)
+    x = a.astype(float).reshape(n)
     if not np.all(np.isfinite(x)):
         raise InputError(f"{name} must be finite, got {x.tolist()}")
     return x
@@ -114,6 +117,13 @@ def _inputs(us: Any) -> list[float]:
 class _SampledObserver:
     """Shared machinery of the discrete observers (filterpy-style interface).
 
+    One base serves the 3-state observers (x1, x2, x3) and the 4-state
+    disturbance observer (x1, x2, x3, d): with ``n = 4`` the linear part sees
+    the lumped ``w = x3 + d`` where the 3-state ones see ``x3``, and ``d`` is
+    held in the predict. A subclass sets ``_n``, ``_hysteresis`` and ``kind``
+    and, for ``n = 4``, how continuous gains map to ``K`` (the hooks
+    ``_check_continuous``, ``_discrete_from`` and ``_observable_K``).
+
     The step is computed on python floats with the scalar entries of the ZOH
     matrices (one sample costs a few microseconds); :func:`phso_step` and
     :func:`eso_step` are independent array twins of it, checked against it in
@@ -121,13 +131,13 @@ class _SampledObserver:
 
     Attributes
     ----------
-    x : ndarray, shape (3,)
-        Current estimate (x1 displacement, x2 velocity, x3 hysteresis).
-    x_prior, x_post : ndarray, shape (3,)
+    x : ndarray, shape (n,)
+        Current estimate (x1 displacement, x2 velocity, x3 hysteresis[, d disturbance]).
+    x_prior, x_post : ndarray, shape (n,)
         Estimate after the last ``predict`` and after the last ``update``.
-    K : ndarray, shape (3,)
+    K : ndarray, shape (n,)
         Discrete correction gains.
-    gains : ndarray, shape (3,) or None
+    gains : ndarray, shape (n,) or None
         Continuous gains the observer was built from (None if built from ``K``).
     y : float
         Last innovation ``z - x_prior[0]`` (0 for a skipped sample).
@@ -138,6 +148,7 @@ class _SampledObserver:
     """
 
     _hysteresis = True
+    _n = 3
     kind = ""
 
     def __init__(
@@ -159,15 +170,17 @@ class _SampledObserver:
         F, g = self._zoh.F, self._zoh.g
         # the two non-trivial rows of F and g (row 3 is x3+ = h, g3 = 0)
         self._coef = (*F[0].tolist(), *F[1].tolist(), float(g[0]), float(g[1]))
+        names = ", ".join(f"l{i + 1}" for i in range(self._n))
         if (gains is None) == (discrete is None):
             raise GainError(
-                f"{type(self).__name__}: give either continuous gains (l1, l2, l3) or "
+                f"{type(self).__name__}: give either continuous gains ({names}) or "
                 "discrete=K, exactly one of them"
             )
         if discrete is None:
-            self.gains = check_gains(params, gains)
-            self.K = discrete_gains(params, self.gains, self.dt)
-            margin, z = schur_margin(params, self.K, self.dt)
+            self.gains = self._check_continuous(params, gains)
+            self.K = self._discrete_from(params, self.gains, self.dt)
+            Ko = self._observable_K(self.K)
+            margin, z = schur_margin(params, Ko, self.dt)
             if not margin < 0:
                 raise GainError(
                     f"gains l = {self.gains.tolist()} at dt = {self.dt:g} s give discrete gains "
@@ -176,8 +189,9 @@ class _SampledObserver:
                 )
         else:
             self.gains = None
-            self.K = _as_gains(discrete, "discrete gains K")
-            rho = np.abs(np.linalg.eigvals(self._zoh.F - np.outer(self.K, C @ self._zoh.F)))
+            self.K = self._check_discrete(discrete)
+            Ko = self._observable_K(self.K)
+            rho = np.abs(np.linalg.eigvals(self._zoh.F - np.outer(Ko, C @ self._zoh.F)))
             if rho.max() >= 1.0:
                 raise GainError(
                     f"discrete gains K = {self.K.tolist()} leave the nominal error dynamics "
@@ -185,9 +199,30 @@ class _SampledObserver:
                 )
         self.reset(x0, u_prev=u_prev)
 
+    # gain hooks (3-state defaults) ------------------------------------------------
+
+    @staticmethod
+    def _check_continuous(params: BoucWenParams, gains: Any) -> np.ndarray:
+        return check_gains(params, gains)
+
+    @staticmethod
+    def _discrete_from(params: BoucWenParams, gains: np.ndarray, dt: float) -> np.ndarray:
+        return discrete_gains(params, gains, dt)
+
+    @staticmethod
+    def _check_discrete(discrete: Any) -> np.ndarray:
+        return _as_gains(discrete, "discrete gains K")
+
+    @staticmethod
+    def _observable_K(K: np.ndarray) -> np.ndarray:
+        """The correction of the observable part (x1, x2, x3 [+ d]), shape (3,)."""
+        return K
+
+    # state -------------------------------------------------------------------------
+
     def reset(self, x0: Any = None, *, u_prev: float = 0.0) -> None:
         """Restart from ``x0`` (default zeros) with ``u_prev`` (V) held before the first sample."""
-        x = np.zeros(3) if x0 is None else _state(x0, "x0")
+        x = np.zeros(self._n) if x0 is None else _state(x0, "x0", self._n)
         self._x = x
         self.x_prior = x.copy()
         self.x_post = x.copy()
@@ -197,35 +232,53 @@ class _SampledObserver:
 
     @property
     def x(self) -> np.ndarray:
-        """Current estimate, shape (3,).
+        """Current estimate, shape (n,).
 
-        Assigning accepts three finite numbers of shape (3,) or filterpy's (3, 1)
-        (stored as (3,)); anything else raises :class:`InputError`.
+        Assigning accepts n finite numbers of shape (n,) or filterpy's (n, 1)
+        (stored as (n,)); anything else raises :class:`InputError`.
         """
         return self._x
 
     @x.setter
     def x(self, value: Any) -> None:
-        self._x = _state(value, "x")
+        self._x = _state(value, "x", self._n)
+
+    @property
+    def x_lumped(self) -> np.ndarray:
+        """``(x1, x2, x3 [+ d])``, shape (3,): what the linear part (and a controller) sees."""
+        x = self._x
+        if self._n == 3:
+            return x.copy()
+        return np.array([x[0], x[1], x[2] + x[3]])
+
+    def _finite(self, xs: list[float]) -> None:
+        if not all(math.isfinite(v) for v in xs):
+            _require_finite_state(self._x, type(self).__name__)
 
     def predict(self, u: float) -> None:
         """Carry the estimate from ``t_k`` to ``t_{k+1}`` with ``u`` (V) held.
 
-        For the PHSO the hysteresis copy first follows the jump ``u_prev -> u``
-        in closed form; then the linear part is propagated exactly (ZOH).
+        With the hysteresis model the copy first follows the jump ``u_prev -> u``
+        in closed form; then the linear part is propagated exactly (ZOH), with
+        ``x3 + d`` in place of ``x3`` for the disturbance observer (``d`` held).
         """
         u = _finite_scalar(u, "u")
-        x1, x2, x3 = self._x.tolist()
-        if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
-            _require_finite_state(self._x, type(self).__name__)
+        xs = self._x.tolist()
+        if self._n == 3:
+            x1, x2, x3 = xs
+            if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
+                _require_finite_state(self._x, type(self).__name__)
+            d = None
+        else:
+            self._finite(xs)
+            x1, x2, x3, d = xs
         if self._hysteresis:
             x3 = hysteresis_increment(self.params, x3, self.u_prev, u)
+        w = x3 if d is None else x3 + d
         f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
-        prior = (
-            f11 * x1 + f12 * x2 + f13 * x3 + g1 * u,
-            f21 * x1 + f22 * x2 + f23 * x3 + g2 * u,
-            x3,
-        )
+        x1n = f11 * x1 + f12 * x2 + f13 * w + g1 * u
+        x2n = f21 * x1 + f22 * x2 + f23 * w + g2 * u
+        prior = (x1n, x2n, x3) if d is None else (x1n, x2n, x3, d)
         self._x = np.array(prior)
         self.x_prior = np.array(prior)
         self.u_prev = u
@@ -244,12 +297,18 @@ class _SampledObserver:
             self.x_post = self._x.copy()
             return
         z = _finite_scalar(z, "z")
-        x1, x2, x3 = self._x.tolist()
-        if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
-            _require_finite_state(self._x, type(self).__name__)
-        k1, k2, k3 = self.K.tolist()
-        r = z - x1
-        post = (x1 + k1 * r, x2 + k2 * r, x3 + k3 * r)
+        xs = self._x.tolist()
+        if self._n == 3:
+            x1, x2, x3 = xs
+            if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
+                _require_finite_state(self._x, type(self).__name__)
+            k1, k2, k3 = self.K.tolist()
+            r = z - x1
+            post = (x1 + k1 * r, x2 + k2 * r, x3 + k3 * r)
+        else:
+            self._finite(xs)
+            r = z - xs[0]
+            post = tuple(xi + ki * r for xi, ki in zip(xs, self.K.tolist(), strict=True))
         self.z = z
         self.y = r
         self._x = np.array(post)
@@ -270,18 +329,22 @@ class _SampledObserver:
 
         Returns
         -------
-        ndarray, shape (N, 3)
+        ndarray, shape (N, n)
             The posterior estimates at ``t_1 .. t_N``.
         """
         ul = _inputs(us)
         zl = _measurements(zs, len(ul))
         if not ul:
-            return np.empty((0, 3))
+            return np.empty((0, self._n))
         f11, f12, f13, f21, f22, f23, g1, g2 = self._coef
-        k1, k2, k3 = self.K.tolist()
-        x1, x2, x3 = self._x.tolist()
-        if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
-            _require_finite_state(self._x, type(self).__name__)
+        Kl = self.K.tolist()
+        k1, k2, k3 = Kl[:3]
+        k4 = Kl[3] if self._n == 4 else 0.0
+        xs = self._x.tolist()
+        self._finite(xs)
+        x1, x2, x3 = xs[:3]
+        four = self._n == 4
+        d = xs[3] if four else 0.0
         up = self.u_prev
         params, hyst = self.params, self._hysteresis
         out = []
@@ -289,18 +352,21 @@ class _SampledObserver:
         for uk, zk in zip(ul, zl, strict=True):
             if hyst:
                 x3 = hysteresis_increment(params, x3, up, uk)
+            w = x3 + d if four else x3
             x1, x2 = (
-                f11 * x1 + f12 * x2 + f13 * x3 + g1 * uk,
-                f21 * x1 + f22 * x2 + f23 * x3 + g2 * uk,
+                f11 * x1 + f12 * x2 + f13 * w + g1 * uk,
+                f21 * x1 + f22 * x2 + f23 * w + g2 * uk,
             )
-            prior = (x1, x2, x3)
+            prior = (x1, x2, x3, d)
             if zk is not None:
                 r = zk - x1
                 x1, x2, x3 = x1 + k1 * r, x2 + k2 * r, x3 + k3 * r
-            append((x1, x2, x3))
+                if four:
+                    d = d + k4 * r
+            append((x1, x2, x3, d))
             up = uk
-        res = np.array(out)
-        self.x_prior = np.array(prior)
+        res = np.array(out)[:, : self._n]
+        self.x_prior = np.array(prior[: self._n])
         self.y = 0.0 if zl[-1] is None else zl[-1] - prior[0]
         self._x, self.x_post, self.u_prev, self.z = res[-1].copy(), res[-1].copy(), up, zl[-1]
         return res
@@ -309,7 +375,7 @@ class _SampledObserver:
         """The continuous form of this observer as a python-control ``NonlinearIOSystem``.
 
         See :func:`observer_iosystem` (inputs ``u``, ``udot``, ``y``; states and
-        outputs ``xhat[0..2]``).
+        outputs ``xhat[0..n-1]``).
 
         Raises
         ------
@@ -320,7 +386,7 @@ class _SampledObserver:
         if self.gains is None:
             raise GainError(
                 f"{type(self).__name__} was built from discrete gains K; the continuous "
-                "form needs continuous gains (l1, l2, l3): build it with gains=..."
+                "form needs continuous gains: build it with gains=..."
             )
         return observer_iosystem(
             self.params, self.gains, kind=self.kind, name=name, allow_unbounded=True

@@ -9,9 +9,9 @@ import numpy as np
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import ZOHModel, hysteresis_increment, phi
-from .gains import check_gains
+from .gains import check_disturbance_gains, check_gains
 
-__all__ = ["phso_step", "eso_step", "phso_rhs", "eso_rhs", "observer_iosystem"]
+__all__ = ["phso_step", "eso_step", "phso_rhs", "eso_rhs", "phdo_rhs", "observer_iosystem"]
 
 
 def phso_step(
@@ -108,7 +108,33 @@ def eso_rhs(
     )
 
 
-_RHS = {"phso": phso_rhs, "eso": eso_rhs}
+def phdo_rhs(
+    params: BoucWenParams, gains: Any, xhat: np.ndarray, u: float, udot: float, y: float
+) -> np.ndarray:
+    """Continuous disturbance hysteresis observer (:class:`DisturbanceHysteresisObserver`).
+
+    ``xhat = (x1, x2, x3, d)``; ``gains = (l1, l2, l3, l4)`` (1/s, 1/s^2, 1/s, 1/s), not
+    validated here. The linear part sees ``x3 + d``; ``d' = l4 (y - x1hat)``.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+        d xhat / dt.
+    """
+    l1, l2, l3, l4 = gains
+    x1, x2, x3, d = xhat
+    r = y - x1
+    return np.array(
+        [
+            x2 + l1 * r,
+            -params.a1 * (x1 + x3 + d) - params.a2 * x2 + params.a3 * u + l2 * r,
+            phi(params, udot, x3) + l3 * r,
+            l4 * r,
+        ]
+    )
+
+
+_RHS = {"phso": phso_rhs, "eso": eso_rhs, "phdo": phdo_rhs}
 
 
 def observer_iosystem(
@@ -134,8 +160,9 @@ def observer_iosystem(
     gains : array_like, shape (3,)
         Continuous gains (l1 in 1/s, l2 in 1/s^2, l3 in 1/s), checked against the
         Hurwitz conditions (4).
-    kind : {"phso", "eso"}
-        Hysteresis observer (eq. 3) or extended state observer (eq. 21).
+    kind : {"phso", "eso", "phdo"}
+        Hysteresis observer (eq. 3), extended state observer (eq. 21), or the
+        disturbance hysteresis observer (:func:`phdo_rhs`; four gains, four states).
     name : str, optional
         System name (default: ``kind``).
     allow_unbounded : bool
@@ -173,9 +200,10 @@ def observer_iosystem(
     import control  # heavy import, only needed here
 
     if kind not in _RHS:
-        raise InputError(f"kind must be 'phso' or 'eso', got {kind!r}")
+        raise InputError(f"kind must be 'phso', 'eso' or 'phdo', got {kind!r}")
     require_bounded(params, allow_unbounded)
-    g = tuple(check_gains(params, gains).tolist())
+    check = check_disturbance_gains if kind == "phdo" else check_gains
+    g = tuple(check(params, gains).tolist())
     f = _RHS[kind]
 
     def updfcn(t, x, u, _params):
@@ -184,7 +212,7 @@ def observer_iosystem(
     def outfcn(t, x, u, _params):
         return x
 
-    xhat = ["xhat[0]", "xhat[1]", "xhat[2]"]
+    xhat = [f"xhat[{i}]" for i in range(len(g))]
     return control.nlsys(
         updfcn,
         outfcn,

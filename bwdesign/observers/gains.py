@@ -21,6 +21,8 @@ __all__ = [
     "place_discrete",
     "delta_transition",
     "schur_margin",
+    "check_disturbance_gains",
+    "disturbance_discrete_gains",
 ]
 
 
@@ -252,3 +254,71 @@ def schur_margin(params: BoucWenParams, K: Any, dt: float) -> tuple[float, np.nd
     d = np.linalg.eigvals(Ad * T[None, :] / T[:, None] / w0) * w0
     margin = float(np.max(dt * (2.0 * d.real + dt * np.abs(d) ** 2)))
     return margin, 1.0 + dt * d
+
+
+def _as_four(gains: Any, what: str) -> np.ndarray:
+    names = "(l1, l2, l3, l4)" if what == "gains" else "(k1, k2, k3, k4)"
+    try:
+        g = np.asarray(gains)
+    except (TypeError, ValueError):
+        raise GainError(f"{what} must be four numbers {names}, got {gains!r}") from None
+    bools = isinstance(gains, list | tuple) and any(isinstance(v, bool | np.bool_) for v in gains)
+    if g.dtype.kind not in "fiu" or bools or g.shape != (4,):
+        raise GainError(f"{what} must be four numbers {names}, got {gains!r}")
+    g = g.astype(float)
+    if not np.all(np.isfinite(g)):
+        raise GainError(f"{what} must be finite, got {g.tolist()}")
+    if g[3] == 0.0:
+        raise GainError(
+            f"{what} {g.tolist()}: the disturbance gain (4th) is 0, so d never moves; "
+            "that is the plain hysteresis observer (HysteresisObserver)"
+        )
+    return g
+
+
+def check_disturbance_gains(params: BoucWenParams, gains: Any) -> np.ndarray:
+    """Validate the continuous gains ``(l1, l2, l3, l4)`` of the disturbance observer.
+
+    The linear part sees only the lumped ``w = x3 + d``, whose injection gain is
+    ``l3 + l4``; ``(l1, l2, l3 + l4)`` must satisfy the Hurwitz conditions (4)
+    (:func:`check_gains`). ``l3`` (any sign, 0 allowed) splits the correction
+    between the hysteresis copy and ``d``; ``l4`` must be nonzero.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+        (l1 1/s, l2 1/s^2, l3 1/s, l4 1/s).
+
+    Raises
+    ------
+    GainError
+    """
+    g = _as_four(gains, "gains")
+    check_gains(params, (g[0], g[1], g[2] + g[3]))
+    return g
+
+
+def disturbance_discrete_gains(params: BoucWenParams, gains: Any, dt: float) -> np.ndarray:
+    """Discrete ``K = (k1, k2, k3, k4)`` of the disturbance observer, by pole matching.
+
+    The observable part in the coordinates ``(x1, x2, w = x3 + d)`` is the
+    3-state model with the lumped gain ``l3 + l4``: its correction
+    ``(k1, k2, kw)`` is :func:`discrete_gains` of ``(l1, l2, l3 + l4)`` (poles
+    ``exp(lambda_i dt)``), and ``kw`` is split as the continuous gains are:
+    ``k3 = kw l3 / (l3 + l4)``, ``k4 = kw l4 / (l3 + l4)``.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+    """
+    l1, l2, l3, l4 = check_disturbance_gains(params, gains)
+    lw = l3 + l4
+    k1, k2, kw = discrete_gains(params, (l1, l2, lw), dt)
+    return np.array([k1, k2, kw * (l3 / lw), kw * (l4 / lw)])
+
+
+def check_disturbance_discrete(K: Any) -> np.ndarray:
+    """Validate discrete gains ``(k1, k2, k3, k4)``; ``(k1, k2, k3 + k4)`` must be in range."""
+    g = _as_four(K, "discrete gains K")
+    _as_gains((g[0], g[1], g[2] + g[3]), "discrete gains (k1, k2, k3 + k4)")
+    return g

@@ -32,13 +32,18 @@ from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import _check_dt, discretize
 from ..model.references import Reference
-from ..observers.gains import check_gains, discrete_gains
+from ..observers.gains import (
+    check_disturbance_gains,
+    check_gains,
+    discrete_gains,
+    disturbance_discrete_gains,
+)
 from .closed_loop import _diverged, _finite_nonneg, _state
 from .metrics import steady_state_window
 
 __all__ = ["BatchResult", "simulate_batch", "hysteresis_increment_batch"]
 
-BATCH_OBSERVERS = ("phso", "eso")
+BATCH_OBSERVERS = ("phso", "eso", "phdo")
 _NOISE_BLOCK = 512
 
 
@@ -206,8 +211,9 @@ def simulate_batch(
     controller : TrackingController
         Continuous or discrete form (its ``u_limits``, ``estimate_limits`` and
         integral action apply); ``hysteresis_jump`` is not batched.
-    observer : {"phso", "eso"}
-    gains : array_like, shape (3,)
+    observer : {"phso", "eso", "phdo"}
+    gains : array_like, shape (3,) (shape (4,) for "phdo"; its ``xhat`` metrics are of
+        the lumped ``x3 + d``, which starts from ``xhat0[2]`` with ``d = 0``)
         Continuous observer gains.
     noise_std : float or array_like, shape (N,)
         Sensor noise std per scenario (length unit).
@@ -246,7 +252,8 @@ def simulate_batch(
         raise InputError(f"duration {duration:g} s holds fewer than 2 samples of dt = {dt:g} s")
     if getattr(controller, "dt", dt) != dt:
         raise InputError(f"the discrete controller was built for dt = {controller.dt:g} s")
-    gains = check_gains(params, gains)
+    four = observer == "phdo"
+    gains = check_disturbance_gains(params, gains) if four else check_gains(params, gains)
     noise_std = _per_scenario(noise_std, N, "noise_std")
     seeds = np.broadcast_to(np.asarray(seeds), (N,))
     if seeds.dtype.kind not in "iu" or np.any(seeds < 0):
@@ -283,13 +290,18 @@ def simulate_batch(
     zm = discretize(params, dt)
     (m11, m12, m13), (m21, m22, m23) = (float(v) for v in zm.F[0]), (float(v) for v in zm.F[1])
     mg1, mg2 = float(zm.g[0]), float(zm.g[1])
-    K1, K2, K3 = (float(v) for v in discrete_gains(params, gains, dt))
-    phso = observer == "phso"
+    if four:
+        K1, K2, K3, K4 = (float(v) for v in disturbance_discrete_gains(params, gains, dt))
+    else:
+        K1, K2, K3 = (float(v) for v in discrete_gains(params, gains, dt))
+        K4 = 0.0
+    phso = observer in ("phso", "phdo")
     ma, mb, mc = params.alpha, params.beta, params.gamma
     H = hysteresis_increment_batch
 
     x1, x2, x3 = (np.full(N, float(v)) for v in x0)
     h1, h2, h3 = (np.full(N, float(v)) for v in xhat0)
+    hd = np.zeros(N)  # the PHDO's disturbance estimate (starts at 0)
     up = np.full(N, u_prev)
     ua = np.full(N, u_prev)
     q = np.zeros(N)
@@ -330,22 +342,27 @@ def simulate_batch(
             h1 = h1 + K1 * r
             h2 = h2 + K2 * r
             h3 = h3 + K3 * r
+            if four:
+                hd = hd + K4 * r
+                hw = h3 + hd
+            else:
+                hw = h3
             if in_win[k]:
                 e = x1 - xd_l[k]
                 a = np.abs(e)
                 sum_abs += a
                 sum_sq += e * e
                 np.maximum(max_abs, a, out=max_abs)  # NaN propagates: unstable, masked below
-                for acc, hh_, xx_ in zip(est_sq, (h1, h2, h3), (x1, x2, x3), strict=True):
+                for acc, hh_, xx_ in zip(est_sq, (h1, h2, hw), (x1, x2, x3), strict=True):
                     d = hh_ - xx_
                     acc += d * d
                 count += 1
             if not delay:
-                applied = law(h1, h2, h3, k)
+                applied = law(h1, h2, hw, k)
             else:
                 applied = ua
                 if not compensate_delay:
-                    u_next = law(h1, h2, h3, k)
+                    u_next = law(h1, h2, hw, k)
             hh = H(T["alpha"], T["beta"], T["gamma"], x3, up, applied)
             x1, x2, x3 = (
                 T["p11"] * x1 + T["p12"] * x2 + T["p13"] * hh + T["g1"] * applied,
@@ -353,28 +370,30 @@ def simulate_batch(
                 hh,
             )
             g3 = H(ma, mb, mc, h3, up, applied) if phso else h3
+            gw = g3 + hd if four else g3
             h1, h2, h3 = (
-                m11 * h1 + m12 * h2 + m13 * g3 + mg1 * applied,
-                m21 * h1 + m22 * h2 + m23 * g3 + mg2 * applied,
+                m11 * h1 + m12 * h2 + m13 * gw + mg1 * applied,
+                m21 * h1 + m22 * h2 + m23 * gw + mg2 * applied,
                 g3,
             )
+            hw = h3 + hd if four else h3
             if delay:
                 if compensate_delay:
-                    u_next = law(h1, h2, h3, k + 1)
+                    u_next = law(h1, h2, hw, k + 1)
                 ua = u_next
             up = applied
             ok = (
                 (np.abs(x1) <= limit)
                 & (np.abs(x3) <= limit)
                 & (np.abs(h1) <= limit)
-                & (np.abs(h3) <= limit)
+                & (np.abs(hw) <= limit)
                 & (np.abs(x2) <= vlim)
                 & (np.abs(h2) <= vlim)
                 & (np.abs(ua) < 1e300)
             )
             for i in np.flatnonzero(alive & ~ok):
                 why = (
-                    _diverged(limit, T["w0"][i], x1[i], x2[i], x3[i], h1[i], h2[i], h3[i], ua[i])
+                    _diverged(limit, T["w0"][i], x1[i], x2[i], x3[i], h1[i], h2[i], hw[i], ua[i])
                     or "non-finite state"
                 )
                 status[i] = f"diverged at t = {(k + 1) * dt:.6g} s: {why}"

@@ -15,8 +15,12 @@ from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize, hysteresis_increment
 from ..model.references import Reference
-from ..observers.gains import _as_gains, check_gains
-from ..observers.sampled import ExtendedStateObserver, HysteresisObserver
+from ..observers.gains import _as_gains, check_disturbance_gains, check_gains
+from ..observers.sampled import (
+    DisturbanceHysteresisObserver,
+    ExtendedStateObserver,
+    HysteresisObserver,
+)
 from ..validate import SEED, integer
 from .metrics import steady_state_window, tracking_metrics
 from .result import SimulationResult
@@ -43,6 +47,13 @@ def _state(value: Any, name: str) -> np.ndarray:
     return x
 
 
+_BUILTIN = {
+    "phso": HysteresisObserver,
+    "eso": ExtendedStateObserver,
+    "phdo": DisturbanceHysteresisObserver,
+}
+
+
 def make_observer(
     kind: Any,
     params: BoucWenParams,
@@ -59,9 +70,11 @@ def make_observer(
 
     Parameters
     ----------
-    kind : {"phso", "eso", "ukf"} or callable
+    kind : {"phso", "eso", "phdo", "ukf"} or callable
         ``"phso"``: :class:`~bwdesign.observers.HysteresisObserver`;
         ``"eso"``: :class:`~bwdesign.observers.ExtendedStateObserver`;
+        ``"phdo"``: :class:`~bwdesign.observers.DisturbanceHysteresisObserver` (four gains;
+        a 3-vector ``x0`` starts ``d`` at 0);
         ``"ukf"``: :class:`bwdesign.observers.ukf.UnscentedObserver` with its default
         noise model (gains are not used); a callable is a factory
         ``factory(params, dt) -> observer`` returning an object with
@@ -86,10 +99,13 @@ def make_observer(
         if x0 is not None and hasattr(obs, "reset"):
             obs.reset(x0, u_prev=u_prev)
         return obs
-    if kind in ("phso", "eso"):
+    if kind in _BUILTIN:
+        cls = _BUILTIN[kind]
         if gains is None:
-            raise InputError(f"the {kind.upper()} needs observer gains l1, l2, l3")
-        cls = HysteresisObserver if kind == "phso" else ExtendedStateObserver
+            names = "l1, l2, l3, l4" if cls._n == 4 else "l1, l2, l3"
+            raise InputError(f"the {kind.upper()} needs observer gains {names}")
+        if x0 is not None and cls._n == 4 and np.shape(x0) == (3,):
+            x0 = np.array([*np.asarray(x0, dtype=float), 0.0])  # d starts at 0
         return cls(params, gains, dt, x0=x0, u_prev=u_prev, allow_unbounded=allow_unbounded)
     if kind == "ukf":
         return _ukf(
@@ -102,7 +118,8 @@ def make_observer(
             allow_unbounded=allow_unbounded,
         )
     raise InputError(
-        f"observer must be 'phso', 'eso', 'ukf', an observer object or a factory, got {kind!r}"
+        "observer must be 'phso', 'eso', 'phdo', 'ukf', an observer object or a factory, got "
+        f"{kind!r}"
     )
 
 
@@ -274,11 +291,13 @@ def simulate(
         Sample time (s).
     duration : float
         Length of the run (s); ``round(duration/dt)`` samples.
-    observer : {"phso", "eso", "ukf"}, observer object or factory
+    observer : {"phso", "eso", "phdo", "ukf"}, observer object or factory
         An object is deep-copied (the caller's is not advanced); it must have
         ``predict(u)``, ``update(z)`` and ``x``.
     gains : array_like, shape (3,)
-        Continuous observer gains (l1 1/s, l2 1/s^2, l3 1/s) for "phso"/"eso".
+        Continuous observer gains (l1 1/s, l2 1/s^2, l3 1/s) for "phso"/"eso";
+        (l1, l2, l3, l4) for "phdo", whose recorded estimate ``xhat`` (and what the law
+        sees) is the lumped ``(x1, x2, x3 + d)``.
     lambda1, lambda2 : float
         Eq. (12) constants (1/s), unless ``controller`` is given.
     controller : TrackingController, optional
@@ -387,16 +406,25 @@ def simulate(
         raise InputError(
             "hysteresis_jump needs an observer with the hysteresis model (PHSO); the ESO has none"
         )
+    if ctrl.hysteresis_jump and (
+        observer == "phdo" or isinstance(observer, DisturbanceHysteresisObserver)
+    ):
+        raise InputError(
+            "hysteresis_jump is not implemented for the disturbance observer (PHDO): its law "
+            "would need the jump of x3 with d added; use the PHSO or a law without the jump"
+        )
     if getattr(ctrl, "dt", dt) != dt:
         raise InputError(f"the discrete controller was built for dt = {ctrl.dt:g} s, not {dt:g} s")
+    if isinstance(observer, str) and observer not in ("phso", "eso", "phdo", "ukf"):
+        raise InputError(f"observer must be 'phso', 'eso', 'phdo' or 'ukf', got {observer!r}")
     if gains is not None:
-        gains = _as_gains(gains)
-    if isinstance(observer, str) and observer not in ("phso", "eso", "ukf"):
-        raise InputError(f"observer must be 'phso', 'eso' or 'ukf', got {observer!r}")
-    if isinstance(observer, str) and observer in ("phso", "eso"):
+        gains = check_disturbance_gains(params, gains) if observer == "phdo" else _as_gains(gains)
+    if isinstance(observer, str) and observer in ("phso", "eso", "phdo"):
         if gains is None:
-            raise InputError(f"the {observer.upper()} needs observer gains l1, l2, l3")
-        check_gains(params, gains)
+            names = "l1, l2, l3, l4" if observer == "phdo" else "l1, l2, l3"
+            raise InputError(f"the {observer.upper()} needs observer gains {names}")
+        if observer != "phdo":
+            check_gains(params, gains)
 
     if observer == "ukf" and udot_max is None:
         from ..model.envelope import derive_envelope
@@ -451,7 +479,7 @@ def simulate(
         "xhat0": xhat0.tolist(),
         "u_prev": u_prev,
     }
-    builtin = type(obs) in (HysteresisObserver, ExtendedStateObserver)
+    builtin = type(obs) in tuple(_BUILTIN.values())
     runner = _run_fast if (fast and builtin) else _run_generic
     rec = runner(
         params=params,
@@ -497,6 +525,12 @@ def _diverged(limit, w0, x1, x2, x3, xh1, xh2, xh3, u) -> str | None:
     return None
 
 
+def _estimate(obs: Any) -> np.ndarray:
+    """What the law sees: ``x_lumped`` (x1, x2, x3 + d) when the observer has it, else ``x``."""
+    lumped = getattr(obs, "x_lumped", None)
+    return np.asarray(obs.x if lumped is None else lumped, dtype=float)
+
+
 def _run_generic(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay, compensate, limit):
     xd_all, vd_all, ad_all = ref
     X = np.empty((n, 3))
@@ -513,7 +547,7 @@ def _run_generic(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay,
         for k in range(n):
             zk = float(x[0]) + float(noise[k])
             obs.update(zk)
-            xh = np.asarray(obs.x, dtype=float)
+            xh = _estimate(obs)
             X[k], XH[k], Z[k] = x, xh, zk
             jkw = {"u_prev": up} if ctrl.hysteresis_jump else {}
             if not delay:
@@ -535,13 +569,13 @@ def _run_generic(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay,
             if delay:
                 if compensate:
                     u_next = ctrl(
-                        np.asarray(obs.x, dtype=float),
+                        _estimate(obs),
                         (xd_all[k + 1], vd_all[k + 1], ad_all[k + 1]),
                         **jkw,
                     )
                 ua = u_next
             up = applied
-            xhn = np.asarray(obs.x, dtype=float)
+            xhn = _estimate(obs)
             why = _diverged(limit, w0, *x, *xhn, applied if not delay else ua)
             if why is not None:
                 stable, status, m = False, f"diverged at t = {(k + 1) * dt:.6g} s: {why}", k + 1
@@ -550,7 +584,7 @@ def _run_generic(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay,
 
 
 def _run_fast(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay, compensate, limit):
-    """Scalar-inlined twin of :func:`_run_generic` for the PHSO and the ESO."""
+    """Scalar-inlined twin of :func:`_run_generic` for the PHSO, the ESO and the PHDO."""
     xd_all, vd_all, ad_all = ref
     Kx, Kr = ctrl.linear_gains()
     ff = Kr[0] * xd_all + Kr[1] * vd_all + Kr[2] * ad_all
@@ -572,15 +606,18 @@ def _run_fast(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay, co
     pg1, pg2 = float(zt.g[0]), float(zt.g[1])
     (m11, m12, m13), (m21, m22, m23) = zm.F[0], zm.F[1]
     mg1, mg2 = float(zm.g[0]), float(zm.g[1])
-    K1, K2, K3 = (float(v) for v in obs.K)
-    phso = type(obs) is HysteresisObserver
+    four = type(obs) is DisturbanceHysteresisObserver
+    K1, K2, K3 = (float(v) for v in obs.K[:3])
+    K4 = float(obs.K[3]) if four else 0.0
+    phso = type(obs) in (HysteresisObserver, DisturbanceHysteresisObserver)
     H = hysteresis_increment
     X = np.empty((n, 3))
     XH = np.empty((n, 3))
     U = np.empty(n)
     Z = np.empty(n)
     x1, x2, x3 = (float(v) for v in x0)
-    h1, h2, h3 = (float(v) for v in obs.x)
+    h1, h2, h3 = (float(v) for v in obs.x[:3])
+    hd = float(obs.x[3]) if four else 0.0
     up = float(u_prev)  # plant: input held over the previous sample
     upo = float(obs.u_prev)  # observer's idea of it
     ua = float(u_prev)
@@ -613,15 +650,20 @@ def _run_fast(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay, co
         h1 += K1 * r
         h2 += K2 * r
         h3 += K3 * r
+        if four:
+            hd += K4 * r
+            hw = h3 + hd
+        else:
+            hw = h3
         X[k, 0], X[k, 1], X[k, 2] = x1, x2, x3
-        XH[k, 0], XH[k, 1], XH[k, 2] = h1, h2, h3
+        XH[k, 0], XH[k, 1], XH[k, 2] = h1, h2, hw
         Z[k] = zk
         if not delay:
-            applied = law(h1, h2, h3, k, up)
+            applied = law(h1, h2, hw, k, up)
         else:
             applied = ua
             if not compensate:
-                u_next = law(h1, h2, h3, k, ua)
+                u_next = law(h1, h2, hw, k, ua)
         U[k] = applied
         # plant
         hh = H(tp, x3, up, applied)
@@ -632,26 +674,28 @@ def _run_fast(*, params, tp, obs, ctrl, dt, n, ref, noise, x0, u_prev, delay, co
         )
         # observer predict
         g3 = H(params, h3, upo, applied) if phso else h3
+        gw = g3 + hd if four else g3
         h1, h2, h3 = (
-            m11 * h1 + m12 * h2 + m13 * g3 + mg1 * applied,
-            m21 * h1 + m22 * h2 + m23 * g3 + mg2 * applied,
+            m11 * h1 + m12 * h2 + m13 * gw + mg1 * applied,
+            m21 * h1 + m22 * h2 + m23 * gw + mg2 * applied,
             g3,
         )
+        hw = h3 + hd if four else h3
         if delay:
             if compensate:
-                u_next = law(h1, h2, h3, k + 1, applied)
+                u_next = law(h1, h2, hw, k + 1, applied)
             ua = u_next
         up = upo = applied
         if not (
             abs(x1) <= limit
             and abs(x3) <= limit
             and abs(h1) <= limit
-            and abs(h3) <= limit
+            and abs(hw) <= limit
             and abs(x2) <= vlim
             and abs(h2) <= vlim
             and abs(ua) < 1e300
         ):
-            why = _diverged(limit, w0, x1, x2, x3, h1, h2, h3, ua) or "non-finite state"
+            why = _diverged(limit, w0, x1, x2, x3, h1, h2, hw, ua) or "non-finite state"
             stable, status, m = False, f"diverged at t = {(k + 1) * dt:.6g} s: {why}", k + 1
             break
     return dict(x=X, xhat=XH, u=U, z=Z, m=m, stable=stable, status=status)
