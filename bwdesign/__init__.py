@@ -7,6 +7,7 @@ modules whose contents may change.
 from ._version import __version__
 from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
+from .certify.robust import RobustCertificate, certify_robust
 from .certify.synthesis import synthesize
 from .certify.tiers import certify, certify_discrete
 from .codegen.export import CExport, export_c
@@ -93,6 +94,8 @@ __all__ = [
     "CExport",
     "certify",
     "certify_discrete",
+    "certify_robust",
+    "RobustCertificate",
     "synthesize",
     "CertificateReport",
     "TierCertificate",

@@ -13,6 +13,7 @@ from .linear import (
     lipschitz_envelope,
 )
 from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCertificate
+from .robust import RobustCertificate, certify_robust
 from .synthesis import default_pole_radius, synthesize
 from .tiers import certify, certify_discrete
 
@@ -27,6 +28,8 @@ __all__ = [
     "rho_interval",
     "certify",
     "certify_discrete",
+    "certify_robust",
+    "RobustCertificate",
     "synthesize",
     "default_pole_radius",
     "ErrorDynamics",

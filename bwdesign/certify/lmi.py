@@ -585,3 +585,37 @@ def sampled_synthesis(
     if refine:
         values["t_min"] = float(t_min)
     return _run(prog, values, first_only=True)
+
+
+# -- robust invariant ellipsoid (bwdesign.certify.robust) ----------------------
+
+
+def robust_ellipsoid(
+    As: list[np.ndarray], Bs: list[np.ndarray], c: np.ndarray, *, a: float, eps: float = 1e-5
+) -> LMISolution:
+    """Smallest peak of ``c'z`` over a common invariant ellipsoid of ``z+ = A_i z + B_i w``.
+
+    The ellipsoid is ``{z' Q^-1 z <= 1}``. For every ``i``:
+    ``[[a Q, 0, Q A_i'], [0, (1-a) diag(lam), B_i'], [A_i Q, B_i, Q]] >= eps I``
+    (the congruence by ``diag(Q, I, Q)`` of the Schur form of
+    ``V(z+) <= a V(z) + (1-a) sum lam_j w_j^2``, ``V = z'Q^-1 z``), ``sum(lam) <= 1``
+    (inputs normalised to ``|w_j| <= 1``) and ``Q >= eps I``; minimises ``c'Qc``, the
+    squared peak of ``c'z`` on the ellipsoid. Variables ``Q`` (n x n), ``lam`` (m,).
+    """
+    n = As[0].shape[0]
+    m = Bs[0].shape[1]
+    Q = cp.Variable((n, n), symmetric=True)
+    lam = cp.Variable(m, nonneg=True)
+    cons = [Q >> eps * np.eye(n), cp.sum(lam) <= 1.0]
+    cc = np.asarray(c, dtype=float).reshape(n)
+    for A, B in zip(As, Bs, strict=True):
+        M = cp.bmat(
+            [
+                [a * Q, np.zeros((n, m)), Q @ A.T],
+                [np.zeros((m, n)), (1 - a) * cp.diag(lam), B.T],
+                [A @ Q, B, Q],
+            ]
+        )
+        cons.append(_sym(M) >> eps * np.eye(2 * n + m))
+    prob = cp.Problem(cp.Minimize(cc @ Q @ cc), cons)
+    return solve(prob, {"Q": Q, "lam": lam}, first_only=True)
