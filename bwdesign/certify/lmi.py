@@ -619,3 +619,37 @@ def robust_ellipsoid(
         cons.append(_sym(M) >> eps * np.eye(2 * n + m))
     prob = cp.Problem(cp.Minimize(cc @ Q @ cc), cons)
     return solve(prob, {"Q": Q, "lam": lam}, first_only=True)
+
+
+def theorem1_synthesis(Ahat: np.ndarray, *, mu: float, lmax: float) -> LMISolution:
+    """Gains for Theorem 1 (sign corrected) in scaled coordinates: least ``||X||``.
+
+    ``He(X Ahat - Z e1') + 2 mu X <= -I``, ``p/100 I <= X <= p I``, ``||Z|| <= lmax p``
+    (so the scaled gain ``||X^-1 Z|| <= 100 lmax``);
+    minimises ``p`` (then ``l = X^-1 Z``). Variables ``X`` (3 x 3), ``Z`` (3,), ``p``.
+    """
+    X = cp.Variable((3, 3), symmetric=True)
+    Z = cp.Variable((3, 1))
+    p = cp.Variable()
+    C = np.array([[1.0, 0.0, 0.0]])
+    He = X @ Ahat + Ahat.T @ X - Z @ C - C.T @ Z.T + 2 * mu * X
+    cons = [X >> (p / 100.0) * _I3, X << p * _I3, _sym(He) << -_I3, cp.norm(Z) <= lmax * p]
+    return solve(cp.Problem(cp.Minimize(p), cons), {"X": X, "Z": Z, "p": p})
+
+
+def lipschitz_synthesis(Ahat: np.ndarray, *, L: float, mu: float, lmax: float) -> LMISolution:
+    """Feasibility of the lipschitz S-procedure LMI in ``(X, Z = X l)`` (scaled coordinates).
+
+    ``[[He(X Ahat - Z e1') + 2 mu X + L^2 e3 e3' + t I, X e3], [e3' X, -1 + t]] <= 0``,
+    ``I <= X <= p I``, ``||Z|| <= lmax p``; maximises the margin ``t`` (certified when
+    ``t > 0``).
+    """
+    X = cp.Variable((3, 3), symmetric=True)
+    Z = cp.Variable((3, 1))
+    t = cp.Variable()
+    C = np.array([[1.0, 0.0, 0.0]])
+    He = X @ Ahat + Ahat.T @ X - Z @ C - C.T @ Z.T + 2 * mu * X + L**2 * (_E3 @ _E3.T)
+    M = cp.bmat([[He + t * _I3, X @ _E3], [_E3.T @ X, cp.reshape(t - 1, (1, 1), order="C")]])
+    p = cp.Variable()
+    cons = [X >> _I3, X << p * _I3, cp.norm(Z) <= lmax * p, _sym(M) << 0, t <= 1.0]
+    return solve(cp.Problem(cp.Maximize(t), cons), {"X": X, "Z": Z, "t": t})
