@@ -140,3 +140,17 @@ def test_paper_experiment_64_vertices():
     sim_track, sim_est = _worst_simulated(p, box)
     assert rc.tracking_bound >= sim_track
     assert rc.estimation_bound >= sim_est[0]
+
+
+@pytest.mark.slow
+def test_report_has_the_robust_section(tmp_path):
+    from bwdesign import load_config
+    from bwdesign.report.certified import build_report
+
+    config = load_config("stack_actuator_800hz")
+    doc, cert, _, _ = build_report(config, tmp_path, quiet=True)
+    rob = cert["robust"]
+    assert rob["certificate"]["holds"]
+    assert rob["certificate"]["n_vertices"] == 64
+    assert rob["certificate"]["tracking_bound"] >= rob["simulated_worst_maxe"] > 0
+    assert rob["conservatism"] >= 1
