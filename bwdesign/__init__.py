@@ -8,6 +8,7 @@ from ._version import __version__
 from .certify.disturbance import LumpedCertificate, certify_disturbance
 from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
+from .certify.robust import RobustCertificate, certify_robust
 from .certify.synthesis import synthesize
 from .certify.tiers import certify, certify_discrete
 from .codegen.export import CExport, export_c
@@ -101,6 +102,8 @@ __all__ = [
     "certify_discrete",
     "certify_disturbance",
     "LumpedCertificate",
+    "certify_robust",
+    "RobustCertificate",
     "synthesize",
     "CertificateReport",
     "TierCertificate",

@@ -19,6 +19,7 @@ from .linear import (
     lipschitz_envelope,
 )
 from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCertificate
+from .robust import RobustCertificate, certify_robust
 from .synthesis import default_pole_radius, synthesize
 from .tiers import certify, certify_discrete
 
@@ -33,6 +34,8 @@ __all__ = [
     "rho_interval",
     "certify",
     "certify_discrete",
+    "certify_robust",
+    "RobustCertificate",
     "synthesize",
     "default_pole_radius",
     "ErrorDynamics",

@@ -55,6 +55,9 @@ __all__ = [
     "solver_versions",
     "lumped_margin",
     "lumped_sampled_synthesis",
+    "robust_ellipsoid",
+    "theorem1_synthesis",
+    "lipschitz_synthesis",
 ]
 
 #: Solvers tried in this order; the first ``OPTIMAL`` answer is used.
@@ -671,3 +674,71 @@ def lumped_sampled_synthesis(
         cons.append(_sym(M4) >> 0)
     prob = cp.Problem(cp.Maximize(t), cons)
     return solve(prob, {"Po": Po, "p": p, "Y": Y, "t": t})
+
+
+# -- robust invariant ellipsoid (bwdesign.certify.robust) ----------------------
+
+
+def robust_ellipsoid(
+    As: list[np.ndarray], Bs: list[np.ndarray], c: np.ndarray, *, a: float, eps: float = 1e-5
+) -> LMISolution:
+    """Smallest peak of ``c'z`` over a common invariant ellipsoid of ``z+ = A_i z + B_i w``.
+
+    The ellipsoid is ``{z' Q^-1 z <= 1}``. For every ``i``:
+    ``[[a Q, 0, Q A_i'], [0, (1-a) diag(lam), B_i'], [A_i Q, B_i, Q]] >= eps I``
+    (the congruence by ``diag(Q, I, Q)`` of the Schur form of
+    ``V(z+) <= a V(z) + (1-a) sum lam_j w_j^2``, ``V = z'Q^-1 z``), ``sum(lam) <= 1``
+    (inputs normalised to ``|w_j| <= 1``) and ``Q >= eps I``; minimises ``c'Qc``, the
+    squared peak of ``c'z`` on the ellipsoid. Variables ``Q`` (n x n), ``lam`` (m,).
+    """
+    n = As[0].shape[0]
+    m = Bs[0].shape[1]
+    Q = cp.Variable((n, n), symmetric=True)
+    lam = cp.Variable(m, nonneg=True)
+    cons = [Q >> eps * np.eye(n), cp.sum(lam) <= 1.0]
+    cc = np.asarray(c, dtype=float).reshape(n)
+    for A, B in zip(As, Bs, strict=True):
+        M = cp.bmat(
+            [
+                [a * Q, np.zeros((n, m)), Q @ A.T],
+                [np.zeros((m, n)), (1 - a) * cp.diag(lam), B.T],
+                [A @ Q, B, Q],
+            ]
+        )
+        cons.append(_sym(M) >> eps * np.eye(2 * n + m))
+    prob = cp.Problem(cp.Minimize(cc @ Q @ cc), cons)
+    return solve(prob, {"Q": Q, "lam": lam}, first_only=True)
+
+
+def theorem1_synthesis(Ahat: np.ndarray, *, mu: float, lmax: float) -> LMISolution:
+    """Gains for Theorem 1 (sign corrected) in scaled coordinates: least ``||X||``.
+
+    ``He(X Ahat - Z e1') + 2 mu X <= -I``, ``p/100 I <= X <= p I``, ``||Z|| <= lmax p``
+    (so the scaled gain ``||X^-1 Z|| <= 100 lmax``);
+    minimises ``p`` (then ``l = X^-1 Z``). Variables ``X`` (3 x 3), ``Z`` (3,), ``p``.
+    """
+    X = cp.Variable((3, 3), symmetric=True)
+    Z = cp.Variable((3, 1))
+    p = cp.Variable()
+    C = np.array([[1.0, 0.0, 0.0]])
+    He = X @ Ahat + Ahat.T @ X - Z @ C - C.T @ Z.T + 2 * mu * X
+    cons = [X >> (p / 100.0) * _I3, X << p * _I3, _sym(He) << -_I3, cp.norm(Z) <= lmax * p]
+    return solve(cp.Problem(cp.Minimize(p), cons), {"X": X, "Z": Z, "p": p})
+
+
+def lipschitz_synthesis(Ahat: np.ndarray, *, L: float, mu: float, lmax: float) -> LMISolution:
+    """Feasibility of the lipschitz S-procedure LMI in ``(X, Z = X l)`` (scaled coordinates).
+
+    ``[[He(X Ahat - Z e1') + 2 mu X + L^2 e3 e3' + t I, X e3], [e3' X, -1 + t]] <= 0``,
+    ``I <= X <= p I``, ``||Z|| <= lmax p``; maximises the margin ``t`` (certified when
+    ``t > 0``).
+    """
+    X = cp.Variable((3, 3), symmetric=True)
+    Z = cp.Variable((3, 1))
+    t = cp.Variable()
+    C = np.array([[1.0, 0.0, 0.0]])
+    He = X @ Ahat + Ahat.T @ X - Z @ C - C.T @ Z.T + 2 * mu * X + L**2 * (_E3 @ _E3.T)
+    M = cp.bmat([[He + t * _I3, X @ _E3], [_E3.T @ X, cp.reshape(t - 1, (1, 1), order="C")]])
+    p = cp.Variable()
+    cons = [X >> _I3, X << p * _I3, cp.norm(Z) <= lmax * p, _sym(M) << 0, t <= 1.0]
+    return solve(cp.Problem(cp.Maximize(t), cons), {"X": X, "Z": Z, "t": t})

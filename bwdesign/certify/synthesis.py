@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GainError
+from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
 from ..observers.gains import check_gains, delta_transition, discrete_gains, error_matrix
@@ -52,6 +52,7 @@ def synthesize(
     pole_radius: float | None = None,
     dt: float | None = None,
     allow_unbounded: bool = False,
+    tier: str | None = None,
 ) -> SynthesisResult:
     """Observer gains certified for ``|u'| <= udot_max`` with at least ``decay``.
 
@@ -94,6 +95,11 @@ def synthesize(
         Sample time (s): synthesise the sampled observer.
     allow_unbounded : bool
         Accept a model outside the bounded class.
+    tier : {"theorem1", "lipschitz", "sector", "sampled"}, optional
+        The tier to synthesise for; default ``sector`` without ``dt``, ``sampled``
+        with it (the behaviour above). ``theorem1`` and ``lipschitz`` are the
+        continuous LMIs of :mod:`bwdesign.certify.tier_synthesis` (no pole region;
+        ``max_udot`` is the envelope the synthesised gains reach).
 
     Returns
     -------
@@ -124,7 +130,15 @@ def synthesize(
         if pole_radius is None
         else real(pole_radius, "pole_radius (rad/s)", within=POLE_RADIUS)
     )
-    if dt is None:
+    if tier is not None and tier not in ("theorem1", "lipschitz", "sector", "sampled"):
+        raise InputError(f"unknown tier {tier!r}; tiers are theorem1, lipschitz, sector, sampled")
+    if tier in ("theorem1", "lipschitz"):
+        from .tier_synthesis import synthesize_tier
+
+        return synthesize_tier(params, tier, udot_max=udot_max, decay=decay)
+    if tier == "sampled" and dt is None:
+        raise InputError("the sampled tier needs the sample time dt (s)")
+    if dt is None or tier == "sector":
         return _synthesize_continuous(params, udot_max, decay, R, allow_unbounded)
     return _synthesize_sampled(params, udot_max, decay, R, dt, allow_unbounded)
 

@@ -42,6 +42,7 @@ from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from ..sim.sweep import bounds_from_config
 from .document import Document
+from .robust import robust_section
 from .sweep import sweep_section
 from .tracking import TrackingRun, input_limits, required_input, tracking_runs
 
@@ -682,6 +683,9 @@ def build_report(
     if config.sweep is not None:
         say(f"Monte Carlo sweep over [uncertainty]: {config.sweep['samples']} scenarios")
         cert_doc["sweep"] = sweep_section(doc, config, figs)
+    if config.uncertainty is not None and not config.uncertainty.undetermined():
+        say("robust certificate over [uncertainty] (every corner)")
+        cert_doc["robust"] = robust_section(doc, config, tuning, v)
 
     # -- firmware ------------------------------------------------------------
     doc.heading("Gains for firmware")

@@ -1,0 +1,491 @@
+"""Robust certificates of the sampled tracking loop over an uncertainty box.
+
+The loop is the one :func:`bwdesign.sim.simulate_batch` runs: the exact ZOH plant
+with the *true* parameters ``theta`` (a point of the :class:`~bwdesign.UncertaintyBox`),
+the sampled PHSO (predict/update, gain ``K = discrete_gains(model, l, dt)``) and the
+discrete eq. (12) law (optionally with integral action and the compensated
+one-sample delay) both built on the *model*. Nothing here assumes the model is
+right.
+
+Error system
+------------
+State ``z = (delta1, delta2, e1, e2, e3[, q][, u~])``: the tracking error
+``delta = (x1 - x_d, x2 - x_d')``, the prior observer error ``e = xhat - x``, the
+integrator and (with the delay) the applied input minus ``u* = ff + Kx . (x_d, x_d', x3)``.
+One step is exactly (no approximation, no saturation, no estimate clipping)::
+
+    e+  = (I - K C) e + K n                        (posterior, n the sensor noise)
+    e'  = Fm D(rho) e+ + Fm e3 dh + (Fm - Fv)[x12; x3 + j] + (gm - gv) u
+    delta' = Fv[x12; x3 + j] + gv u - (x_d, x_d')(k+1)
+
+with ``D(rho) = diag(1, 1, rho)``, ``rho`` the slope of the model's hysteresis jump
+map (:func:`rho_interval`, time varying), ``j`` the plant's hysteresis increment,
+``dh`` the model-minus-plant increment at the same ``x3`` and ``x12 = (x_d, x_d') +
+delta``. The model error is an *input driven by the state and the reference*:
+its state-dependent part ``(Fm - Fv)[:, :2] delta`` stays in the vertex's system
+matrix, the rest is exogenous: the reference terms (computed exactly along the
+reference, per vertex), ``|x3| <= h_max``, ``|j| <= (alpha + (|beta| + |gamma|)
+h_max) |du|``, ``|dh| <= (|dalpha| + (|dbeta| + |dgamma|) h_max) |du|
+exp((|beta| + |gamma|) |du|)`` (Gronwall) with ``|du| <= udot_max dt``, and
+``|n| <= noise_max``.
+
+Certificate
+-----------
+One quadratic Lyapunov function ``V = z'Pz`` for every corner of the box and both
+ends of ``rho``: ``V(z+) <= a V(z) + (1 - a) sum lam_j w_j^2`` (LMI
+:func:`bwdesign.certify.lmi.robust_ellipsoid`). *Common*, not parameter-dependent,
+because ``rho_k`` changes every sample (a ``P(rho)`` is not a Lyapunov function
+for a time-varying ``rho``), and one ``P`` for all ``theta`` keeps the program a
+plain vertex LMI. It certifies: the loop's error converges at rate
+``-ln(a) / (2 dt)`` into ``{z'Pz <= 1}`` (inputs normalised), so in steady state
+``|x1 - x_d| <= sqrt(c'P^-1 c)`` and likewise for the estimation errors. The ZOH
+matrices are not affine in ``(a1, a2, a3)``: the LMI covers the convex hull of the
+corner matrices, and the result is re-checked with the same ``P`` at seeded interior
+points of the box (``interior_samples``), whose input bounds are included.
+
+Numerics: the state is balanced (:func:`scipy.linalg.matrix_balance` of the nominal
+loop matrix), the inputs normalised to ``|w| <= 1``; every LMI block is re-checked
+with ``numpy.linalg.eigvalsh`` outside the solver (``min eig > 0``), and the bound is
+recomputed from ``P`` with numpy. Solver trouble is a status, never a certificate.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.linalg import matrix_balance, solve_discrete_lyapunov
+
+from ..control.controllers import TuningWarning, make_controller
+from ..errors import InputError
+from ..model.params import BoucWenParams, require_bounded
+from ..model.plant import check_sample_time, discretize
+from ..model.references import Reference
+from ..model.uncertainty import UncertaintyBox
+from ..observers.gains import check_gains, discrete_gains
+from ..validate import UDOT_MAX, real
+from .checks import rho_interval
+from .results import Margin
+
+__all__ = ["RobustCertificate", "certify_robust"]
+
+_EXO = ("reference", "x3", "j", "dh", "noise")
+
+
+@dataclass(frozen=True)
+class RobustCertificate:
+    """Robust convergence and steady error bounds of the sampled loop over a box.
+
+    Attributes
+    ----------
+    holds : bool
+        A common ``P`` passed the outside check at every corner, both ``rho`` ends
+        and every interior sample.
+    status : str
+    decay : float or None
+        Certified convergence rate of the error into the ellipsoid (1/s).
+    tracking_bound, estimation_bound, x3_estimation_bound : float or None
+        Certified steady bounds on ``|x1 - x_d|``, ``|x1hat - x1|`` and
+        ``|x3hat - x3|`` (posterior) at the sample instants (length unit).
+    a : float
+        Contraction factor per sample used in the LMI.
+    noise_max : float
+        Sensor noise bound assumed (length unit).
+    n_vertices, n_interior : int
+    input_bounds : dict
+        Bound of each exogenous channel (the reference channel per state).
+    margins : tuple of Margin
+        Smallest eigenvalue per checked block (passed when ``-min eig < 0``).
+    solver : str
+    details : dict
+    """
+
+    holds: bool
+    status: str
+    decay: float | None
+    tracking_bound: float | None
+    estimation_bound: float | None
+    x3_estimation_bound: float | None
+    a: float
+    noise_max: float
+    n_vertices: int
+    n_interior: int
+    input_bounds: dict[str, Any]
+    margins: tuple[Margin, ...] = ()
+    solver: str = ""
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        worst = min(self.margins, key=lambda m: m.limit - m.value) if self.margins else None
+        return {
+            "holds": self.holds,
+            "status": self.status,
+            "decay": self.decay,
+            "tracking_bound": self.tracking_bound,
+            "estimation_bound": self.estimation_bound,
+            "x3_estimation_bound": self.x3_estimation_bound,
+            "a": self.a,
+            "noise_max": self.noise_max,
+            "n_vertices": self.n_vertices,
+            "n_interior": self.n_interior,
+            "input_bounds": self.input_bounds,
+            "worst_margin": None if worst is None else worst.to_dict(),
+            "solver": self.solver,
+            "details": self.details,
+        }
+
+
+@dataclass(frozen=True)
+class _Loop:
+    Fm: np.ndarray
+    gm: np.ndarray
+    K: np.ndarray
+    Kx: np.ndarray
+    Kr: np.ndarray
+    ki: float
+    dt: float
+    integral: bool
+    delay: bool
+
+    @property
+    def n(self) -> int:
+        return 5 + int(self.integral) + int(self.delay)
+
+
+def _step(lp: _Loop, Fv, gv, rho: float, z: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """One sample of the error system (linear in ``z`` and ``s``; see the module doc).
+
+    ``s = (x_d, x_d', x_d(k+1), x_d'(k+1), uref, x3, j, dh, n)`` with
+    ``uref = ff + Kx1 x_d + Kx2 x_d'``.
+    """
+    d, e = z[0:2], z[2:5]
+    q = z[5] if lp.integral else 0.0
+    xd, vd, xd1, vd1, uref, x3, j, dh, n = s
+    ep = e - lp.K * e[0] + lp.K * n
+    Kx = lp.Kx
+    if lp.delay:
+        ut = z[-1]
+    else:
+        ut = lp.ki * q + Kx[0] * d[0] + Kx[1] * d[1] + Kx @ ep
+    u = uref + Kx[2] * x3 + ut
+    xt = np.array([xd + d[0], vd + d[1], x3 + j])
+    dn = Fv[:2] @ xt + gv[:2] * u - np.array([xd1, vd1])
+    en = lp.Fm @ np.array([ep[0], ep[1], rho * ep[2] + dh]) + (lp.Fm - Fv) @ xt + (lp.gm - gv) * u
+    out = [dn, en]
+    if lp.integral:
+        inc = dn[0] + en[0] if lp.delay else d[0] + ep[0]
+        out.append(np.array([q + lp.dt * inc]))
+    if lp.delay:
+        out.append(np.array([lp.ki * q + Kx[0] * dn[0] + Kx[1] * dn[1] + Kx @ en]))
+    return np.concatenate(out)
+
+
+def _matrices(lp: _Loop, Fv, gv, rho: float) -> tuple[np.ndarray, np.ndarray]:
+    n = lp.n
+    A = np.column_stack([_step(lp, Fv, gv, rho, z, np.zeros(9)) for z in np.eye(n)])
+    B = np.column_stack([_step(lp, Fv, gv, rho, np.zeros(n), s) for s in np.eye(9)])
+    return A, B
+
+
+def _hyst_bounds(model: BoucWenParams, tp: BoucWenParams, du: float) -> tuple[float, float, float]:
+    hm = model.bounded_class().h_max
+    hv = tp.bounded_class().h_max
+    H = max(hm, hv)
+    j = (tp.alpha + (abs(tp.beta) + abs(tp.gamma)) * hv) * du
+    c = abs(model.beta) + abs(model.gamma)
+    df = abs(model.alpha - tp.alpha) + (abs(model.beta - tp.beta) + abs(model.gamma - tp.gamma)) * H
+    return hv, j, df * du * math.exp(c * du)
+
+
+def certify_robust(
+    params: BoucWenParams,
+    gains: Any,
+    *,
+    dt: float,
+    uncertainty: UncertaintyBox,
+    udot_max: float,
+    reference: Reference,
+    lambda1: float,
+    lambda2: float,
+    integral_rate: float | None = None,
+    delay: bool = False,
+    noise_max: float = 0.0,
+    a: float | None = None,
+    interior_samples: int = 16,
+    seed: int = 0,
+) -> RobustCertificate:
+    """Certify the sampled PHSO tracking loop over every plant in an uncertainty box.
+
+    Parameters
+    ----------
+    params : BoucWenParams
+        The model (observer and controller).
+    gains : sequence of 3 floats
+        Continuous observer gains (pole-matched to ``K`` as the observer runs them).
+    dt : float
+        Sample time (s).
+    uncertainty : UncertaintyBox
+        The box of true plants (finite half-widths).
+    udot_max : float
+        Input-rate envelope (V/s) the certificate assumes: ``|du| <= udot_max dt``.
+    reference : Reference
+        The reference tracked (its terms are evaluated exactly over two periods).
+    lambda1, lambda2, integral_rate : float
+        Discrete eq. (12) constants (1/s), as :func:`bwdesign.control.controllers.make_controller`.
+    delay : bool
+        The one-sample computation delay with compensation (as the digital tuning).
+    noise_max : float
+        Sensor noise bound ``|n| <= noise_max`` (length unit).
+    a : float, optional
+        Contraction per sample in ``(0, 1)``; default: searched for the
+        smallest tracking bound.
+    interior_samples : int
+        Seeded interior points of the box where the same ``P`` is re-checked.
+    seed : int
+
+    Returns
+    -------
+    RobustCertificate
+    """
+    require_bounded(params)
+    dt = check_sample_time(params, dt)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+    noise_max = float(noise_max)
+    if not (math.isfinite(noise_max) and noise_max >= 0):
+        raise InputError(f"noise_max must be finite and >= 0, got {noise_max}")
+    if not isinstance(uncertainty, UncertaintyBox):
+        raise InputError("uncertainty must be an UncertaintyBox")
+    if not isinstance(reference, Reference):
+        raise InputError(f"reference must be a Sine, Triangle or Step, got {reference!r}")
+    l = check_gains(params, gains)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", TuningWarning)
+        ctrl = make_controller(
+            params, lambda1, lambda2, form="discrete", dt=dt, integral_rate=integral_rate
+        )
+    Kx, Kr = ctrl.linear_gains()
+    zm = discretize(params, dt)
+    lp = _Loop(
+        Fm=np.asarray(zm.F),
+        gm=np.asarray(zm.g),
+        K=discrete_gains(params, l, dt),
+        Kx=np.asarray(Kx, float),
+        Kr=np.asarray(Kr, float),
+        ki=float(ctrl.ki),
+        dt=dt,
+        integral=ctrl.integral_rate is not None,
+        delay=bool(delay),
+    )
+    vertices = uncertainty.vertices(params)
+    rng = np.random.default_rng(seed)
+    interior = uncertainty.sample(params, rng, int(interior_samples))
+    for tp in [*vertices, *interior]:
+        require_bounded(tp)
+    rho_lo, rho_hi = rho_interval(params, udot_max, dt)
+    du = udot_max * dt
+
+    # reference terms along two periods (or 1 s), exactly, per plant
+    period = reference.period or 1.0
+    nk = max(int(math.ceil(2 * period / dt)), 4)
+    xd, vd, ad = (np.asarray(v, float) for v in reference.evaluate(np.arange(nk + 1) * dt))
+    ff = Kr[0] * xd + Kr[1] * vd + Kr[2] * ad
+    uref = ff + Kx[0] * xd + Kx[1] * vd
+    R = np.column_stack([xd[:-1], vd[:-1], xd[1:], vd[1:], uref[:-1]])
+
+    def plant_data(tp):
+        zt = discretize(tp, dt)
+        Fv, gv = np.asarray(zt.F), np.asarray(zt.g)
+        mats = [_matrices(lp, Fv, gv, r) for r in (rho_lo, rho_hi)]
+        Bref = mats[0][1][:, :5]  # rho does not act on the reference columns
+        wref = np.abs(R @ Bref.T).max(axis=0)
+        return mats, wref, _hyst_bounds(params, tp, du)
+
+    data_v = [plant_data(tp) for tp in vertices]
+    data_i = [plant_data(tp) for tp in interior]
+    wref = np.max([d[1] for d in data_v + data_i], axis=0)
+    hb = np.max([d[2] for d in data_v + data_i], axis=0)
+    W = np.concatenate([wref, [hb[0], hb[1], hb[2], noise_max]])
+    input_bounds = {
+        "reference": wref.tolist(),
+        "x3": float(hb[0]),
+        "j": float(hb[1]),
+        "dh": float(hb[2]),
+        "noise": noise_max,
+    }
+
+    def exo(B):  # reference terms as one channel per state, then x3, j, dh, n
+        return np.column_stack([np.eye(lp.n), B[:, 5:]])
+
+    keep = W > 0
+    Wk = W[keep]
+    # state scaling: balance the nominal loop, then the square root of the diagonal of
+    # its steady covariance under the normalised inputs, so that P is O(1)
+    A_nom, B_nom = _matrices(lp, lp.Fm, lp.gm, 1.0)
+    _, (s, _) = matrix_balance(A_nom, permute=False, separate=True)
+    s = np.asarray(s, float)
+    if float(np.max(np.abs(np.linalg.eigvals(A_nom)))) < 1:
+        Ab = A_nom * s[None, :] / s[:, None]
+        Bb = exo(B_nom)[:, keep] * Wk[None, :] / s[:, None]
+        X = solve_discrete_lyapunov(Ab, Bb @ Bb.T)
+        s = s * np.sqrt(np.maximum(np.diag(X), 1e-12 * float(np.max(np.diag(X)))))
+
+    def scaled(A, B):
+        Bs = exo(B)[:, keep] * Wk[None, :]
+        return A * s[None, :] / s[:, None], Bs / s[:, None]
+
+    blocks_v = [scaled(A, B) for d in data_v for (A, B) in d[0]]
+    blocks_i = [scaled(A, B) for d in data_i for (A, B) in d[0]]
+    n = lp.n
+    e = np.eye(n)
+    c_track = e[0]
+    c_est = (1 - lp.K[0]) * e[2]
+    c_x3 = e[4] - lp.K[2] * e[2]
+    base = {
+        "n_vertices": len(vertices),
+        "n_interior": len(interior),
+        "input_bounds": input_bounds,
+        "noise_max": noise_max,
+    }
+    spec = max(float(np.max(np.abs(np.linalg.eigvals(A)))) for A, _ in blocks_v + blocks_i)
+    if spec >= 1:
+        return RobustCertificate(
+            holds=False,
+            status=(
+                f"not certified: the loop is unstable at a corner of the box (spectral radius "
+                f"{spec:.6g} >= 1 at rho in [{rho_lo:.6g}, {rho_hi:.6g}])"
+            ),
+            decay=None,
+            tracking_bound=None,
+            estimation_bound=None,
+            x3_estimation_bound=None,
+            a=math.nan,
+            details={"spectral_radius": spec},
+            **base,
+        )
+    from . import lmi
+
+    def attempt(av: float, c: np.ndarray):
+        sol = lmi.robust_ellipsoid([b[0] for b in blocks_v], [b[1] for b in blocks_v], s * c, a=av)
+        return sol
+
+    def check(sol, av: float):
+        Q = np.asarray(sol["Q"])
+        Q = (Q + Q.T) / 2
+        lam = np.maximum(np.asarray(sol["lam"]), 0.0)
+        margins = [Margin("Q > 0", -float(np.linalg.eigvalsh(Q).min()), 0.0)]
+        m = lam.size
+        for idx, (A, B) in enumerate(blocks_v + blocks_i):
+            M = np.block(
+                [
+                    [av * Q, np.zeros((n, m)), Q @ A.T],
+                    [np.zeros((m, n)), (1 - av) * np.diag(lam), B.T],
+                    [A @ Q, B, Q],
+                ]
+            )
+            M = (M + M.T) / 2
+            dg = np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))
+            ev = float(np.linalg.eigvalsh(M / np.outer(dg, dg)).min())
+            where = "corner" if idx < len(blocks_v) else "interior"
+            margins.append(Margin(f"Schur block {idx} ({where}) > 0", -ev, 0.0))
+        gam = float(lam.sum())
+
+        def peak(c):
+            cs = s * c
+            return math.sqrt(max(gam, 0.0) * float(cs @ Q @ cs))
+
+        return margins, peak
+
+    if a is None:
+        # golden-section search of the contraction on log(1 - a) for the tracking bound
+        rad = spec**2
+        lo, hi = math.log(max(1 - 0.999999, 1e-9)), math.log(1 - rad)
+        best = None
+        cache: dict[float, Any] = {}
+
+        def f(x: float) -> float:
+            av = 1 - math.exp(x)
+            if x not in cache:
+                sol = attempt(av, c_track)
+                cache[x] = (sol, av, sol.objective if sol.ok else math.inf)
+            return cache[x][2]
+
+        g = (math.sqrt(5) - 1) / 2
+        x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+        for _ in range(6):
+            if f(x1) <= f(x2):
+                hi, x2 = x2, x1
+                x1 = hi - g * (hi - lo)
+            else:
+                lo, x1 = x1, x2
+                x2 = lo + g * (hi - lo)
+        ok = [v for v in cache.values() if v[0].ok]
+        if ok:
+            best = min(ok, key=lambda v: v[2])
+        sol, av = (best[0], best[1]) if best else (None, math.nan)
+    else:
+        av = float(a)
+        if not 0 < av < 1:
+            raise InputError(f"a must be in (0, 1), got {av}")
+        sol = attempt(av, c_track)
+    if sol is None or not sol.ok:
+        status = sol.status if sol is not None else "infeasible for every contraction tried"
+        return RobustCertificate(
+            holds=False,
+            status=(
+                f"not certified: no common Lyapunov function over the {len(vertices)} corners "
+                f"and rho in [{rho_lo:.6g}, {rho_hi:.6g}] ({status})"
+            ),
+            decay=None,
+            tracking_bound=None,
+            estimation_bound=None,
+            x3_estimation_bound=None,
+            a=av,
+            solver=sol.solver if sol is not None else "",
+            details={"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []},
+            **base,
+        )
+    margins, peak = check(sol, av)
+    holds = all(m.passed for m in margins)
+    bounds = [peak(c_track), None, None]
+    # the estimation bounds: their own objective at the same contraction
+    for i, c in ((1, c_est), (2, c_x3)):
+        s2 = attempt(av, c)
+        if s2.ok:
+            m2, pk = check(s2, av)
+            if all(m.passed for m in m2):
+                bounds[i] = pk(c)
+        if bounds[i] is None and holds:
+            bounds[i] = peak(c)
+    if bounds[1] is not None:
+        bounds[1] += abs(lp.K[0]) * noise_max
+    if bounds[2] is not None:
+        bounds[2] += abs(lp.K[2]) * noise_max
+    decay = -math.log(av) / (2 * dt)
+    worst = max(margins, key=lambda m: m.value - m.limit)
+    if holds:
+        status = (
+            f"certified over {len(vertices)} corners (+{len(interior)} interior points): "
+            f"steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
+            f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s"
+        )
+    else:
+        status = (
+            f"not certified: the solver's P failed the outside check ({worst.name}: "
+            f"min eig {-worst.value:.3g})"
+        )
+    return RobustCertificate(
+        holds=holds,
+        status=status,
+        decay=decay if holds else None,
+        tracking_bound=bounds[0] if holds else None,
+        estimation_bound=bounds[1] if holds else None,
+        x3_estimation_bound=bounds[2] if holds else None,
+        a=av,
+        margins=tuple(margins),
+        solver=sol.solver,
+        details={"spectral_radius": spec, "rho_interval": [rho_lo, rho_hi]},
+        **base,
+    )

@@ -1,0 +1,175 @@
+"""Gain synthesis for the ``theorem1`` and ``lipschitz`` tiers (``synthesize(..., tier=...)``).
+
+Both LMIs are solved in ``(X, Z = X l^)`` in scaled coordinates: state
+``eps^ = S eps`` with ``S = diag(1, 1/w0, 1)``, ``w0 = sqrt(a1)``, and time
+``tau = w0 t``, so that ``A^ = S A0 S^-1 / w0 = [[0, 1, 0], [-1, -a2/w0, -1], [0, 0, 0]]``
+has O(1) entries for every stage (a1 spans 1e3..1e9).
+
+``theorem1``
+    The paper's Theorem 1 with the sign corrected, in the norm ``||S eps||``:
+    ``He(X A^_cl) + 2 (mu/w0) X <= -I`` means ``V = eps^' X eps^`` has
+    ``V' <= -(w0 - 2 L ||X||) ||eps^||^2`` (``|phi~| <= L |eps3| <= L ||eps^||``
+    since ``S`` keeps ``eps3``), so the envelope is ``w0 / (2 c ||X||)`` with
+    ``c = |beta| + |gamma|``; the LMI minimises ``||X||``. This scaled norm is the
+    state scaling chosen for the theorem: :func:`certify`'s ``theorem1`` tier uses
+    the unscaled norm, and the result's ``report`` says what that gives for the
+    same gains.
+``lipschitz``
+    The S-procedure LMI ``[[He(X A^_cl) + 2 mu^ X + L^^2 e3 e3', X e3], [e3' X, -1]] < 0``
+    (``mu^ = mu/w0``, ``L^ = L/w0``), bisected on ``L`` for the largest feasible;
+    the gains are re-certified by :func:`certify`'s ``lipschitz`` tier (exact).
+
+Every ``X`` is re-checked with ``numpy.linalg.eigvalsh`` outside the solver; solver
+trouble is never a design.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..model.params import BoucWenParams
+from ..observers.gains import error_matrix
+from .checks import _lipschitz_coefficient
+from .results import Margin, SynthesisResult
+from .tiers import certify
+
+__all__ = ["synthesize_tier"]
+
+#: Bound on the scaled gain ``||Z|| <= LMAX ||X||`` (``l^ = X^-1 Z`` in units of ``w0``):
+#: the analogue of the default pole radius ``10 sqrt(a1)``.
+LMAX = 10.0
+
+
+def _scaled(params: BoucWenParams) -> tuple[float, np.ndarray, np.ndarray]:
+    w0 = math.sqrt(params.a1)
+    s = np.array([1.0, 1.0 / w0, 1.0])
+    Ahat = np.array([[0.0, 1.0, 0.0], [-1.0, -params.a2 / w0, -1.0], [0.0, 0.0, 0.0]])
+    return w0, s, Ahat
+
+
+def _gains(X: np.ndarray, Z: np.ndarray, w0: float, s: np.ndarray) -> tuple[float, float, float]:
+    lt = np.linalg.solve(X, np.asarray(Z, float).reshape(3))
+    l = w0 * lt / s
+    return float(l[0]), float(l[1]), float(l[2])
+
+
+def _cl(params: BoucWenParams, gains, w0: float, s: np.ndarray) -> np.ndarray:
+    A = error_matrix(params, gains)
+    return s[:, None] * A / s[None, :] / w0
+
+
+def _refused(params, tier, udot_max, decay, status) -> SynthesisResult:
+    return SynthesisResult(
+        feasible=False,
+        tier=tier,
+        gains=None,
+        discrete_gains=None,
+        udot_max=udot_max,
+        decay=decay,
+        pole_radius=math.inf,
+        dt=None,
+        binding="udot_max",
+        reason=f"no {tier} design: {status}",
+        max_decay=None,
+        max_udot=0.0,
+        margin=None,
+        solver="",
+        status=status,
+        report=None,
+        params=params,
+    )
+
+
+def synthesize_tier(
+    params: BoucWenParams, tier: str, *, udot_max: float, decay: float
+) -> SynthesisResult:
+    """Synthesise gains for ``tier`` in ``("theorem1", "lipschitz")`` (see the module doc)."""
+    from . import lmi
+
+    w0, s, Ahat = _scaled(params)
+    c = _lipschitz_coefficient(params)
+    mu = decay / w0
+    gains = None
+    envelope = 0.0
+    margin: Margin | None = None
+    solver, status = "", ""
+    if tier == "theorem1":
+        sol = lmi.theorem1_synthesis(Ahat, mu=mu, lmax=LMAX)
+        solver, status = sol.solver, sol.status
+        if sol.ok:
+            X = (np.asarray(sol["X"]) + np.asarray(sol["X"]).T) / 2
+            gains = _gains(X, np.asarray(sol["Z"]), w0, s)
+            try:
+                Acl = _cl(params, gains, w0, s)
+            except ValueError as err:  # gains out of the supported range: not a design
+                return _refused(params, tier, udot_max, decay, f"{sol.status}; {err}")
+            M = X @ Acl + Acl.T @ X + 2 * mu * X
+            q = -float(np.linalg.eigvalsh((M + M.T) / 2).max())
+            nX = float(np.linalg.eigvalsh(X).max())
+            pos = float(np.linalg.eigvalsh(X).min()) > 0
+            # outside check: envelope w0 q / (2 c ||X||) in the scaled norm
+            envelope = w0 * q / (2 * c * nX) if (pos and q > 0 and c > 0) else 0.0
+            margin = Margin("2 L ||X|| < w0 q (scaled norm)", 2 * c * udot_max * nX, w0 * q)
+    else:
+
+        def feasible(L: float):
+            sol = lmi.lipschitz_synthesis(Ahat, L=L / w0, mu=mu, lmax=LMAX)
+            return sol if sol.ok and float(sol["t"]) > 0 else None
+
+        lo, hi, best = 0.0, c * udot_max, None
+        while (cand := feasible(hi)) is not None and hi < 1e6 * w0:
+            lo, best, hi = hi, cand, hi * 4
+        for _ in range(30):
+            if hi / max(lo, 1e-300) < 1.01:
+                break
+            mid = math.sqrt(lo * hi) if lo > 0 else hi / 4
+            cand = feasible(mid)
+            if cand is not None:
+                lo, best = mid, cand
+            else:
+                hi = mid
+        if best is not None:
+            solver, status = best.solver, best.status
+            X = (np.asarray(best["X"]) + np.asarray(best["X"]).T) / 2
+            gains = _gains(X, np.asarray(best["Z"]), w0, s)
+        else:
+            status = "infeasible at every L tried"
+    report = None
+    if gains is not None:
+        try:
+            report = certify(params, gains, udot_max=udot_max, decay=decay, tiers=(tier,))
+        except ValueError as err:  # the gains break the Hurwitz conditions: not a design
+            status = f"{status}; re-certification refused the gains: {err}"
+            gains = None
+    if tier == "lipschitz" and report is not None:
+        envelope = report.tier("lipschitz").max_udot
+    holds = gains is not None and udot_max < envelope
+    if tier == "theorem1":
+        holds = holds and margin is not None and margin.passed
+    reason = (
+        f"gains {gains} reach |u'| <= {envelope:.6g} V/s for the {tier} tier"
+        if gains is not None
+        else f"no {tier} design: {status}"
+    )
+    return SynthesisResult(
+        feasible=holds,
+        tier=tier,
+        gains=gains if holds else None,
+        discrete_gains=None,
+        udot_max=udot_max,
+        decay=decay,
+        pole_radius=math.inf,
+        dt=None,
+        binding=None if holds else "udot_max",
+        reason=reason,
+        max_decay=None,
+        max_udot=envelope,
+        margin=None if margin is None else margin.limit - margin.value,
+        solver=solver,
+        status=status,
+        report=report,
+        params=params,
+        pole_check=margin,
+    )

@@ -1,0 +1,156 @@
+"""Robust certificates of the sampled PHSO loop over an uncertainty box (issue 10, item 3)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bwdesign import Sine, UncertaintyBox, certify_robust, preset
+from bwdesign.control.controllers import make_controller
+from bwdesign.sim.batch import simulate_batch
+
+DT = 2e-4
+GAINS = (786.2, 28982.94, -782.0931942250238)  # the paper stage's digital tuning
+LOOP = {"lambda1": 250.0, "lambda2": 250.0, "integral_rate": 125.0}
+REF = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
+UDOT = 80 * 2 * np.pi * 1.1
+
+
+def _custom():
+    # not a preset: the paper stage with more damping, a weaker hysteresis and its own name
+    p = preset("paper_experiment")
+    return p.replace(a2=1.5 * p.a2, alpha=0.8 * p.alpha, name="custom_stage")
+
+
+def _worst_simulated(params, box, *, noise_std=0.0, duration=3.0):
+    ctrl = make_controller(params, form="discrete", dt=DT, **LOOP)
+    xd, vd, ad = (float(v[0]) for v in REF.evaluate(np.array([0.0])))
+    u0 = float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad]))
+    res = simulate_batch(
+        params,
+        REF,
+        box.vertices(params),
+        dt=DT,
+        duration=duration,
+        controller=ctrl,
+        gains=GAINS,
+        delay=True,
+        noise_std=noise_std,
+        seeds=np.arange(2 ** len(box.widths)),
+        x0=[xd, vd, 0.0],
+        xhat0=[xd, vd, 0.0],
+        u_prev=u0,
+    )
+    assert res.stable.all()
+    return float(np.max(res.maxe)), np.max(res.estimation_rmse, axis=0)
+
+
+def _certify(params, box, **kw):
+    return certify_robust(
+        params,
+        GAINS,
+        dt=DT,
+        uncertainty=box,
+        udot_max=UDOT,
+        reference=REF,
+        delay=True,
+        **LOOP,
+        **kw,
+    )
+
+
+def test_robust_bound_covers_brute_force_vertices_on_a_custom_stage():
+    p = _custom()
+    box = UncertaintyBox.from_dict({"a1": {"rel": 0.02}, "a3": {"rel": 0.02}})
+    rc = _certify(p, box, interior_samples=4)
+    assert rc.holds, rc.status
+    assert rc.n_vertices == 4
+    assert all(m.passed for m in rc.margins)
+    sim_track, sim_est = _worst_simulated(p, box)
+    # the certificate bounds every sample; the simulation's worst is a lower bound of it
+    assert rc.tracking_bound >= sim_track > 0
+    assert rc.estimation_bound >= sim_est[0]
+    assert rc.x3_estimation_bound >= sim_est[2]
+    assert rc.tracking_bound / sim_track < 100  # conservative, not vacuous
+
+
+def test_noise_enters_the_bound():
+    p = _custom()
+    box = UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
+    quiet = _certify(p, box, interior_samples=0, a=0.99)
+    noisy = _certify(p, box, interior_samples=0, a=0.99, noise_max=0.1)
+    assert quiet.holds and noisy.holds
+    assert noisy.tracking_bound > quiet.tracking_bound
+    assert noisy.input_bounds["noise"] == 0.1
+
+
+def test_a_box_too_wide_is_not_certified_with_the_reason():
+    p = preset("paper_experiment")
+    box = UncertaintyBox.from_dict({"a3": {"rel": 0.6}})
+    rc = _certify(p, box, interior_samples=0)
+    assert not rc.holds
+    assert rc.tracking_bound is None
+    assert "not certified" in rc.status
+    # the reason: an unstable corner, no common Lyapunov function, or a P the check refuses
+    assert any(
+        why in rc.status for why in ("unstable at a corner", "common Lyapunov", "outside check")
+    )
+
+
+def test_solver_trouble_is_never_a_certificate(monkeypatch):
+    from bwdesign.certify import lmi
+
+    def broken(*args, **kwargs):
+        return lmi.LMISolution(ok=False, status="solver_error", solver="CLARABEL", objective=None)
+
+    monkeypatch.setattr(lmi, "robust_ellipsoid", broken)
+    box = UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
+    rc = _certify(_custom(), box, interior_samples=0, a=0.99)
+    assert not rc.holds and rc.tracking_bound is None
+    assert "solver_error" in rc.status
+
+
+def test_a_failing_outside_check_is_not_a_certificate(monkeypatch):
+    from bwdesign.certify import lmi
+
+    real = lmi.robust_ellipsoid
+
+    def shrunk(*args, **kwargs):
+        sol = real(*args, **kwargs)
+        values = {"Q": 0.5 * np.asarray(sol["Q"]), "lam": np.asarray(sol["lam"])}
+        return lmi.LMISolution(True, sol.status, sol.solver, sol.objective, values)
+
+    monkeypatch.setattr(lmi, "robust_ellipsoid", shrunk)
+    box = UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
+    rc = _certify(_custom(), box, interior_samples=0, a=0.99)
+    assert not rc.holds
+    assert "outside check" in rc.status
+
+
+@pytest.mark.slow
+def test_paper_experiment_64_vertices():
+    p = preset("paper_experiment")
+    box = UncertaintyBox.from_dict(
+        {k: {"rel": 0.02} for k in ("a1", "a2", "a3")}
+        | {k: {"rel": 0.1} for k in ("alpha", "beta", "gamma")}
+    )
+    rc = _certify(p, box, interior_samples=8)
+    assert rc.holds, rc.status
+    assert rc.n_vertices == 64
+    sim_track, sim_est = _worst_simulated(p, box)
+    assert rc.tracking_bound >= sim_track
+    assert rc.estimation_bound >= sim_est[0]
+
+
+@pytest.mark.slow
+def test_report_has_the_robust_section(tmp_path):
+    from bwdesign import load_config
+    from bwdesign.report.certified import build_report
+
+    config = load_config("stack_actuator_800hz")
+    doc, cert, _, _ = build_report(config, tmp_path, quiet=True)
+    rob = cert["robust"]
+    assert rob["certificate"]["holds"]
+    assert rob["certificate"]["n_vertices"] == 64
+    assert rob["certificate"]["tracking_bound"] >= rob["simulated_worst_maxe"] > 0
+    assert rob["conservatism"] >= 1
