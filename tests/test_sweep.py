@@ -24,6 +24,7 @@ from bwdesign import (
 from bwdesign.cli.main import main
 from bwdesign.errors import InputError, UnboundedModelError
 from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
+from bwdesign.sim.start import start_on_reference
 from bwdesign.sim.sweep import SweepError, SweepSpec, box_bounds, draw_scenarios, run_sweep
 
 DT = 2e-4
@@ -361,3 +362,28 @@ def test_report_sweep_needs_an_uncertainty_box(tmp_path, capsys):
     assert main(["report", "--config", str(stage), "--out", str(out), "--quiet"]) == 2
     assert "no [uncertainty] section" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_sweep_runs_the_disturbance_observer(tune):
+    """The PHDO in a sweep: the tuning's (l1, l2, 0, l3), the same rows as simulate_batch."""
+    from bwdesign.observers.gains import disturbance_gains_from
+
+    spec = _spec(tune, ("phso", "phdo"))
+    sc = draw_scenarios(P, box_bounds(P, BOX), 4, seed=2)
+    table = run_sweep(spec, sc, chunk_size=4, workers=0)
+    assert set(table["observer"]) == {"phso", "phdo"}
+    tps, _ = _mismatched(4, seed=2)
+    ref = simulate_batch(
+        P,
+        spec.reference,
+        tps,
+        dt=DT,
+        duration=spec.duration,
+        controller=spec.controller,
+        observer="phdo",
+        gains=disturbance_gains_from(spec.gains),
+        noise_std=spec.noise_std,
+        seeds=sc["noise_seed"],
+        **start_on_reference(P, spec.reference),
+    )
+    np.testing.assert_array_equal(table["me"][table["observer"] == "phdo"], ref.me)

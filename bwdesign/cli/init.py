@@ -98,7 +98,7 @@ _SPEC: dict[str, list[tuple[str, str, str | None]]] = {
     "sweep": [
         ("samples", "number of scenarios the report's Monte Carlo section runs, > 0", None),
         ("seed", "seed of the draw, >= 0 (default 0)", None),
-        ("observers", '["phso", "eso"]: the observers compared', None),
+        ("observers", '["phso", "eso", "phdo"]: the observers compared', None),
         (
             "tuning",
             '"config" ([observer] and [controller]) or "digital" (the digital tuning)',

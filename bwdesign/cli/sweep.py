@@ -71,7 +71,11 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--distribution", choices=("uniform", "normal"), default="uniform")
     p.add_argument("--seed", type=nonneg_int, default=0, help="seed of the draw (>= 0)")
-    p.add_argument("--observers", default="phso,eso", help="observers to run (default phso,eso)")
+    p.add_argument(
+        "--observers",
+        default="phso,eso",
+        help="observers to run: phso, eso, phdo (default phso,eso)",
+    )
     p.add_argument(
         "--tuning",
         choices=("config", "digital"),

@@ -11,7 +11,7 @@ import numpy as np
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import _check_dt
-from ..observers.gains import _as_gains
+from ..observers.gains import _as_gains, disturbance_gains_from
 from ..validate import Range, integer
 from .analysis import LoopAnalysis, analyze_loop
 from .systems import LoopSystems, _stable, loop_systems
@@ -125,8 +125,7 @@ class DigitalTuning:
         converges for every input; see :class:`bwdesign.DisturbanceHysteresisObserver`).
         """
         if observer == "phdo":
-            l1, l2, l3 = self.gains
-            return (l1, l2, 0.0, l3)
+            return disturbance_gains_from(self.gains)
         if observer not in ("phso", "eso"):
             raise InputError(f"observer must be 'phso', 'eso' or 'phdo', got {observer!r}")
         return tuple(self.gains)

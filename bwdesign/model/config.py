@@ -199,8 +199,11 @@ def _sweep(table: Any) -> dict[str, Any] | None:
             out[key] = t[key]
     if "observers" in t:
         obs = t["observers"]
-        if not isinstance(obs, list) or not obs or any(o not in ("phso", "eso") for o in obs):
-            raise ConfigError(f'[sweep] observers must be a list of "phso", "eso", got {obs!r}')
+        allowed = ("phso", "eso", "phdo")
+        if not isinstance(obs, list) or not obs or any(o not in allowed for o in obs):
+            raise ConfigError(
+                f'[sweep] observers must be a list of "phso", "eso", "phdo", got {obs!r}'
+            )
         out["observers"] = tuple(obs)
     for key in ("noise_std_um", "duration_s"):
         if key in t:

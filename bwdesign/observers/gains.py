@@ -15,6 +15,7 @@ from ..model.plant import _check_dt, discretize
 from ..validate import GAIN
 
 __all__ = [
+    "disturbance_gains_from",
     "check_gains",
     "error_matrix",
     "discrete_gains",
@@ -274,6 +275,17 @@ def _as_four(gains: Any, what: str) -> np.ndarray:
             "that is the plain hysteresis observer (HysteresisObserver)"
         )
     return g
+
+
+def disturbance_gains_from(gains: Any) -> tuple[float, float, float, float]:
+    """The disturbance observer's gains ``(l1, l2, 0, l3)`` from a 3-state design ``(l1, l2, l3)``.
+
+    Its observable part ``(x1, x2, x3 + d)`` then has the poles of the 3-state
+    design, the whole correction of the lumped state goes to ``d``, and the
+    hysteresis copy runs on the model alone (``l3 = 0``).
+    """
+    l1, l2, l3 = (float(g) for g in _as_gains(gains))
+    return (l1, l2, 0.0, l3)
 
 
 def check_disturbance_gains(params: BoucWenParams, gains: Any) -> np.ndarray:

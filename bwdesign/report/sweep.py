@@ -169,7 +169,7 @@ def sweep_document(
             dt=spec.dt,
             duration=spec.duration,
             observer=obs,
-            gains=spec.gains,
+            gains=spec.gains_for(obs),
             controller=spec.controller,
             true_params=tp,
             noise_std=spec.noise_std,

@@ -32,6 +32,7 @@ from ..errors import BWDesignError, InputError, UnboundedModelError
 from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
+from ..observers.gains import disturbance_gains_from
 from .batch import BATCH_OBSERVERS, simulate_batch
 from .start import start_on_reference
 
@@ -70,7 +71,7 @@ class SweepSpec:
         Sample time and run length (s).
     controller : TrackingController
     gains : tuple of 3 floats
-        Continuous observer gains.
+        Continuous observer gains (the PHDO runs ``(l1, l2, 0, l3)`` of them).
     observers : tuple of str
         Observers run on every scenario (``"phso"``, ``"eso"``).
     noise_std : float
@@ -92,6 +93,10 @@ class SweepSpec:
     noise_std: float = 0.0
     delay: bool = False
     start: str = "reference"
+
+    def gains_for(self, observer: str) -> tuple[float, ...]:
+        """The continuous gains ``observer`` runs: ``gains``; ``(l1, l2, 0, l3)`` for the PHDO."""
+        return disturbance_gains_from(self.gains) if observer == "phdo" else tuple(self.gains)
 
     def __post_init__(self) -> None:
         if self.start not in ("reference", "rest"):
@@ -232,7 +237,7 @@ def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.n
             duration=spec.duration,
             controller=spec.controller,
             observer=obs,
-            gains=spec.gains,
+            gains=spec.gains_for(obs),
             noise_std=spec.noise_std,
             seeds=cols["noise_seed"],
             delay=spec.delay,
