@@ -472,32 +472,20 @@ def _synthesize_continuous(
         )
         return _attempt(sol)
 
-    first = attempt(udot_max, decay, True)
-    rejected = ""
-    if first.ok:
-        design = _refine(first, lambda t_min: attempt(udot_max, decay, True, t_min))
-        P = np.asarray(design.sol["P"])
-        lh = np.linalg.solve((P + P.T) / 2, np.asarray(design.sol["Y"]).ravel())
-        gains = tuple(float(x) for x in w * T * lh)
-        res = _finish(
-            params, first, gains, None, "sector", udot_max, decay, R, None, allow_unbounded
-        )
-        if res.feasible:
-            return res
-        rejected = res.reason
-    found = _search(params, udot_max, decay, R, None, allow_unbounded, first)
-    if found is not None:
-        return found
-    return _diagnose(
+    def extract(sol: Any) -> tuple[tuple[float, ...], None]:
+        lh = _gain_from(sol)
+        return tuple(float(x) for x in w * T * lh), None
+
+    return _conclude(
         params,
         attempt,
+        extract,
         tier="sector",
         udot_max=udot_max,
         decay=decay,
         R=R,
         dt=None,
-        first=first,
-        rejected=rejected,
+        allow_unbounded=allow_unbounded,
     )
 
 
@@ -528,15 +516,50 @@ def _synthesize_sampled(
         )
         return _attempt(sol)
 
+    def extract(sol: Any) -> tuple[Any, tuple[float, ...]]:
+        K = tuple(float(x) for x in T * _gain_from(sol))
+        return continuous_equivalent(params, K, dt), K
+
+    return _conclude(
+        params,
+        attempt,
+        extract,
+        tier="sampled",
+        udot_max=udot_max,
+        decay=decay,
+        R=R,
+        dt=dt,
+        allow_unbounded=allow_unbounded,
+    )
+
+
+def _gain_from(sol: Any) -> np.ndarray:
+    """The scaled gain ``P^-1 Y`` of a synthesis LMI's solution."""
+    P = np.asarray(sol["P"])
+    return np.linalg.solve((P + P.T) / 2, np.asarray(sol["Y"]).ravel())
+
+
+def _conclude(
+    params: BoucWenParams,
+    attempt: Callable[..., _Attempt],
+    extract: Callable[[Any], tuple[Any, Any]],
+    *,
+    tier: str,
+    udot_max: float,
+    decay: float,
+    R: float,
+    dt: float | None,
+    allow_unbounded: bool,
+) -> SynthesisResult:
+    """The one ending of both syntheses: refine a feasible LMI design and verify its gains
+    outside the solver; otherwise search the pole region with the exact criterion; otherwise
+    name the binding requirement (:func:`_diagnose`)."""
     first = attempt(udot_max, decay, True)
     rejected = ""
     if first.ok:
         design = _refine(first, lambda t_min: attempt(udot_max, decay, True, t_min))
-        P = np.asarray(design.sol["P"])
-        Kh = np.linalg.solve((P + P.T) / 2, np.asarray(design.sol["Y"]).ravel())
-        K = tuple(float(x) for x in T * Kh)
-        gains = continuous_equivalent(params, K, dt)
-        res = _finish(params, first, gains, K, "sampled", udot_max, decay, R, dt, allow_unbounded)
+        gains, K = extract(design.sol)
+        res = _finish(params, first, gains, K, tier, udot_max, decay, R, dt, allow_unbounded)
         if res.feasible:
             return res
         rejected = res.reason
@@ -546,7 +569,7 @@ def _synthesize_sampled(
     return _diagnose(
         params,
         attempt,
-        tier="sampled",
+        tier=tier,
         udot_max=udot_max,
         decay=decay,
         R=R,
