@@ -9,6 +9,7 @@ from .certify.disturbance import LumpedCertificate, certify_disturbance
 from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
 from .certify.robust import RobustCertificate, certify_robust
+from .certify.robust_synthesis import RobustDesign, synthesize_robust
 from .certify.synthesis import synthesize
 from .certify.tiers import certify, certify_discrete
 from .codegen.export import CExport, export_c
@@ -104,6 +105,8 @@ __all__ = [
     "LumpedCertificate",
     "certify_robust",
     "RobustCertificate",
+    "synthesize_robust",
+    "RobustDesign",
     "synthesize",
     "CertificateReport",
     "TierCertificate",

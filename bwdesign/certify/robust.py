@@ -79,6 +79,9 @@ __all__ = ["RobustCertificate", "certify_robust"]
 _EXO = ("reference", "x3", "j", "dh", "noise")
 #: Normalised eigenvalue below which an interior block joins the LMI.
 _ACTIVE_TOL = 1e-9
+#: Contraction search: grid points on log(1 - a), then golden-section steps.
+_A_GRID = 7
+_A_REFINE = 5
 
 
 @dataclass(frozen=True)
@@ -437,9 +440,12 @@ def certify_robust(
         return margins, peak
 
     if a is None:
-        # golden-section search of the contraction on log(1 - a) for the tracking bound
+        # the contraction on x = log(1 - a): a coarse grid first (the program is badly
+        # conditioned as a -> 1 and infeasible near a = spectral radius^2, so a bracket
+        # from the ends alone can fail on both sides), then a golden-section refinement
+        # around the best grid point
         rad = spec**2
-        lo, hi = math.log(max(1 - 0.999999, 1e-9)), math.log(1 - rad)
+        lo, hi = math.log(1e-5), math.log(1 - rad)
         best = None
         cache: dict[float, Any] = {}
 
@@ -450,15 +456,20 @@ def certify_robust(
                 cache[x] = (sol, av, sol.objective if sol.ok else math.inf)
             return cache[x][2]
 
-        g = (math.sqrt(5) - 1) / 2
-        x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-        for _ in range(6):
-            if f(x1) <= f(x2):
-                hi, x2 = x2, x1
-                x1 = hi - g * (hi - lo)
-            else:
-                lo, x1 = x1, x2
-                x2 = lo + g * (hi - lo)
+        grid = np.linspace(lo, hi, _A_GRID + 2)[1:-1]
+        k = int(np.argmin([f(float(x)) for x in grid]))
+        if math.isfinite(f(float(grid[k]))):
+            lo = float(grid[k - 1]) if k > 0 else lo
+            hi = float(grid[k + 1]) if k + 1 < len(grid) else hi
+            g = (math.sqrt(5) - 1) / 2
+            x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+            for _ in range(_A_REFINE):
+                if f(x1) <= f(x2):
+                    hi, x2 = x2, x1
+                    x1 = hi - g * (hi - lo)
+                else:
+                    lo, x1 = x1, x2
+                    x2 = lo + g * (hi - lo)
         ok = [v for v in cache.values() if v[0].ok]
         if ok:
             best = min(ok, key=lambda v: v[2])

@@ -82,6 +82,27 @@ def synthesize_args(p: argparse.ArgumentParser) -> None:
         metavar="R",
         help="observer poles within |s| < R (rad/s); default 10 sqrt(a1), at most 1/dt",
     )
+    p.add_argument(
+        "--tier",
+        choices=("theorem1", "lipschitz", "sector", "sampled"),
+        default=None,
+        help="the tier to synthesise for (default: sampled with a dt, else sector); theorem1 "
+        "and lipschitz are continuous and report the envelope their gains reach",
+    )
+    p.add_argument(
+        "--robust",
+        action="store_true",
+        help="design the sampled tracking loop (observer gains, lambda, integral rate) against "
+        "the stage file's [uncertainty] box and certify it over every corner "
+        "(bwdesign.certify.robust_synthesis); needs [uncertainty], [reference] and a dt",
+    )
+    p.add_argument(
+        "--noise-max",
+        type=nonneg_float,
+        default=0.0,
+        metavar="N",
+        help="with --robust: sensor noise bound |n| <= N (length unit) of the certified bounds",
+    )
 
 
 def _num(x: float | None, fmt: str = ".4g") -> str:
@@ -238,6 +259,14 @@ def run_synthesize(args: argparse.Namespace) -> int:
         args.pole_radius = stage.default(
             args, "pole_radius", "[synthesis]", spec.get("pole_radius")
         )
+    if args.robust:
+        if args.tier is not None:
+            raise UsageError(
+                "--tier and --robust do not go together (--robust is the sampled loop)"
+            )
+        from .robust_synth import run_robust
+
+        return run_robust(args, stage)
     res = synthesize(
         params,
         udot_max=args.udot_max,
@@ -245,6 +274,7 @@ def run_synthesize(args: argparse.Namespace) -> int:
         pole_radius=args.pole_radius,
         dt=args.dt,
         allow_unbounded=args.allow_unbounded,
+        tier=args.tier,
     )
     if args.json:
         print(dump_json(_json(res.to_dict(), params, stage)))

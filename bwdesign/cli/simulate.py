@@ -283,7 +283,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         raise UsageError("--udot-max applies to --observer ukf only (the UKF's process noise)")
     if args.tuning is not None and args.dt is None:
         raise UsageError("--dt is required (or a --plant FILE.toml that sets it)")
-    tuning = _tuning(args, params) if args.tuning is not None else None
+    tuning = _tuning(args, params, stage) if args.tuning is not None else None
     if args.observer in _N_GAINS and args.gains is None:
         names = ",".join(f"l{i + 1}" for i in range(_N_GAINS[args.observer]))
         raise UsageError(f"--observer {args.observer} needs --gains {names} (or --tuning digital)")
@@ -374,9 +374,18 @@ def _file_defaults(args: argparse.Namespace, stage: Stage) -> None:
         args.udot_max = stage.default(args, "udot_max", "[envelope]", env.udot_max)
 
 
-def _tuning(args: argparse.Namespace, params) -> dict:
-    """Set the gains and constants of ``args`` from the digital tuning; what was used, as JSON."""
-    tu = digital_tuning(params, args.dt, delay=args.delay)
+def _tuning(args: argparse.Namespace, params, stage: Stage) -> dict:
+    """Set the gains and constants of ``args`` from the digital tuning; what was used, as JSON.
+
+    With a stage file whose ``[uncertainty]`` is finite, the tuning is chosen against
+    that box (margins at every corner of its linear part) instead of the default +-2 %.
+    """
+    box = None if stage.config is None else stage.config.uncertainty
+    if box is not None and box.undetermined():
+        box = None
+    if box is not None:
+        stage.used["--tuning"] = "[uncertainty] box"
+    tu = digital_tuning(params, args.dt, delay=args.delay, uncertainty=box)
     kw = tu.controller_kwargs(observer=args.observer)
     args.gains = tuple(float(g) for g in kw["gains"])
     args.lambda1, args.lambda2 = float(kw["lambda1"]), float(kw["lambda2"])
@@ -393,6 +402,8 @@ def _tuning(args: argparse.Namespace, params) -> dict:
         "dt": tu.dt,
         "delay": tu.delay,
         "met": tu.met,
+        "mismatch": tu.mismatch,
+        "against": "[uncertainty]" if box is not None else "default mismatch",
         "reasoning": tu.reasoning,
     }
 

@@ -11,6 +11,7 @@ import numpy as np
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import _check_dt
+from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import _as_gains, disturbance_gains_from
 from ..validate import Range, integer
 from .analysis import LoopAnalysis, analyze_loop
@@ -162,6 +163,43 @@ class DigitalTuning:
         }
 
 
+def _mismatch_plants(
+    params: BoucWenParams, mismatch: float, box: UncertaintyBox | None
+) -> tuple[list[BoucWenParams | None], dict[str, float]]:
+    """The plants the margins are checked on (None = the model) and their relative errors."""
+    if box is None:
+        truths: list[BoucWenParams | None] = [None]
+        if mismatch > 0:
+            truths += [
+                params.replace(a1=params.a1 * (1 + d1), a3=params.a3 * (1 + d3))
+                for d1 in (-mismatch, mismatch)
+                for d3 in (-mismatch, mismatch)
+            ]
+        return truths, {"a1": mismatch, "a3": mismatch}
+    linear = ("a1", "a2", "a3")
+    checked = {k: box.half_width(k, params) / abs(getattr(params, k)) for k in linear}
+    if not all(math.isfinite(v) for v in checked.values()):
+        raise InputError(
+            "the uncertainty box leaves "
+            + ", ".join(k for k, v in checked.items() if not math.isfinite(v))
+            + " undetermined (infinite half-width): give a finite range to tune against"
+        )
+    seen = {tuple(getattr(params, k) for k in linear)}
+    truths = [None]
+    for v in box.vertices(params):
+        key = tuple(getattr(v, k) for k in linear)
+        if key not in seen:
+            seen.add(key)
+            truths.append(params.replace(**dict(zip(linear, key, strict=True))))
+    return truths, {k: v for k, v in checked.items() if v > 0}
+
+
+def _corners_text(checked: dict[str, float], n: int) -> str:
+    if not checked:
+        return "no mismatch corner"
+    return ", ".join(f"{k} = (1 +- {v:.3g})" for k, v in checked.items()) + f" model ({n} corners)"
+
+
 def _fast_margins(sy: LoopSystems, dt: float, w: np.ndarray) -> tuple[float, float, float] | None:
     """Worst-case screening margins (GM dB, PM deg, DM s) of a sampled loop from a grid.
 
@@ -218,7 +256,8 @@ def digital_tuning(
     gains: Any = None,
     observer_radius: float | None = None,
     integral_ratio: float | None = 0.5,
-    mismatch: float = 0.02,
+    mismatch: float | None = None,
+    uncertainty: UncertaintyBox | None = None,
     delay: bool = True,
     min_gain_margin_db: float = 6.0,
     min_phase_margin: float = 45.0,
@@ -247,7 +286,9 @@ def digital_tuning(
     3. For each observer bandwidth, ``lambda`` is scanned over
        ``[omega_o/100, omega_o/2]``; each candidate's linear loop (with the
        one-sample delay if ``delay``) is screened at nominal and at the four
-       corners ``a1, a3 = (1 +- mismatch) model`` from its frequency response.
+       corners ``a1, a3 = (1 +- mismatch) model`` (with ``uncertainty``: at
+       every distinct ``(a1, a2, a3)`` corner of the box instead) from its
+       frequency response.
        The best few are then analysed exactly (:func:`analyze_loop`). Among
        the candidates whose worst-case *robustness score*
        ``min(GM/GM_req, PM/PM_req, DM/DM_req)`` reaches 1, the slowest
@@ -269,8 +310,13 @@ def digital_tuning(
         None (default) searches it.
     integral_ratio : float or None
         Integral pole as a fraction of ``lambda``; None for no integral action.
-    mismatch : float
-        Relative a1, a3 error the margins must survive (0.02 = +-2 %).
+    mismatch : float, optional
+        Relative a1, a3 error the margins must survive (default 0.02 = +-2 %).
+    uncertainty : UncertaintyBox, optional
+        Choose against this box instead of ``mismatch``: the margins must hold
+        at every corner of its linear part ``(a1, a2, a3)`` (the hysteresis
+        parameters do not enter the linear margins; :func:`bwdesign.certify_robust`
+        covers them). Not together with ``mismatch``.
     delay : bool
         Include a one-sample computation delay (delay-compensated law).
     min_gain_margin_db, min_phase_margin : float
@@ -287,6 +333,12 @@ def digital_tuning(
     dt = _check_dt(dt)
     if observer_radius is not None and not 0 < observer_radius < 2:
         raise InputError(f"observer_radius must be in (0, 2), got {observer_radius}")
+    if uncertainty is not None and mismatch is not None:
+        raise InputError("give mismatch or uncertainty, not both")
+    if uncertainty is not None and not isinstance(uncertainty, UncertaintyBox):
+        raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
+    if mismatch is None:
+        mismatch = 0.0 if uncertainty is not None else 0.02
     if not 0 <= mismatch < 0.5:
         raise InputError(f"mismatch must be a relative error in [0, 0.5), got {mismatch}")
     if integral_ratio is not None and not integral_ratio > 0:
@@ -314,15 +366,7 @@ def digital_tuning(
             )
         )
         observers = [(float(np.min(np.abs(ev))), l)]
-    corners = [(0.0, 0.0)]
-    if mismatch > 0:
-        corners += [(d1, d3) for d1 in (-mismatch, mismatch) for d3 in (-mismatch, mismatch)]
-    truths = [
-        None
-        if (d1, d3) == (0.0, 0.0)
-        else params.replace(a1=params.a1 * (1 + d1), a3=params.a3 * (1 + d3))
-        for d1, d3 in corners
-    ]
+    truths, checked = _mismatch_plants(params, mismatch, uncertainty)
     req = {
         "min_gain_margin_db": float(min_gain_margin_db),
         "min_phase_margin": float(min_phase_margin),
@@ -465,7 +509,7 @@ def digital_tuning(
             f"lambda = lambda1 = lambda2 scanned over {int(n_candidates)} values in "
             f"[omega_o/100, omega_o/2] for each observer bandwidth ({n_screened} candidates, "
             "screened from the frequency response, the best 3 confirmed by the exact analysis)",
-            f"each checked at nominal and at a1, a3 = (1 +- {mismatch:g}) model"
+            f"each checked at nominal and at {_corners_text(checked, len(truths) - 1)}"
             + (" with a one-sample computation delay" if delay else ""),
             (
                 "chosen: the slowest observer (least sensor noise) with a candidate meeting "
@@ -490,7 +534,7 @@ def digital_tuning(
         dt=dt,
         form="discrete",
         delay=bool(delay),
-        mismatch={"a1": mismatch, "a3": mismatch},
+        mismatch=checked,
         nominal=nominal,
         worst_gain_margin_db=row["worst_gain_margin_db"],
         worst_phase_margin=row["worst_phase_margin_deg"],

@@ -1,0 +1,178 @@
+"""Design against the uncertainty box: the tuning's corners and the certified robust design."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from bwdesign import Sine, UncertaintyBox, preset
+from bwdesign.certify.robust_synthesis import synthesize_robust
+from bwdesign.control.controllers import make_controller
+from bwdesign.control.tuning import digital_tuning
+from bwdesign.errors import InputError
+from bwdesign.sim.batch import simulate_batch
+
+DT = 2e-4
+REF = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
+UDOT = 80 * 2 * np.pi * 1.1
+
+
+def _custom():
+    # not a preset: more damping, a weaker hysteresis, its own name
+    p = preset("paper_experiment")
+    return p.replace(a2=1.5 * p.a2, alpha=0.8 * p.alpha, name="custom_stage")
+
+
+def _box(**rel):
+    return UncertaintyBox.from_dict({k: {"rel": v} for k, v in rel.items()})
+
+
+def test_tuning_is_checked_at_every_linear_corner_of_the_box():
+    p = preset("paper_experiment")
+    box = _box(a1=0.02, a2=0.05, a3=0.03, alpha=0.1)
+    tu = digital_tuning(p, DT, uncertainty=box)
+    assert tu.mismatch == pytest.approx({"a1": 0.02, "a2": 0.05, "a3": 0.03})
+    assert "(8 corners)" in tu.reasoning
+    # the worst margins are over the box's corners: never better than the nominal loop's
+    assert tu.worst_gain_margin_db <= tu.nominal.gain_margin_db + 1e-9
+    default = digital_tuning(p, DT)
+    assert default.mismatch == {"a1": 0.02, "a3": 0.02}
+    assert "(4 corners)" in default.reasoning
+
+
+def test_tuning_refuses_two_mismatch_sources_and_an_undetermined_box():
+    p = preset("paper_experiment")
+    with pytest.raises(InputError, match="not both"):
+        digital_tuning(p, DT, mismatch=0.02, uncertainty=_box(a1=0.02))
+    box = UncertaintyBox.from_dict({"a1": {"rel": float("inf")}})
+    with pytest.raises(InputError, match="a1 undetermined"):
+        digital_tuning(p, DT, uncertainty=box)
+    with pytest.raises(InputError, match="UncertaintyBox"):
+        digital_tuning(p, DT, uncertainty={"a1": 0.02})
+
+
+def _worst_corner(params, box, design):
+    ctrl = make_controller(
+        params,
+        design.lambda1,
+        design.lambda2,
+        form="discrete",
+        dt=DT,
+        integral_rate=design.integral_rate,
+    )
+    xd, vd, ad = (float(v[0]) for v in REF.evaluate(np.array([0.0])))
+    res = simulate_batch(
+        params,
+        REF,
+        box.vertices(params),
+        dt=DT,
+        duration=3.0,
+        controller=ctrl,
+        gains=design.gains,
+        delay=design.delay,
+        x0=[xd, vd, 0.0],
+        xhat0=[xd, vd, 0.0],
+        u_prev=float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad])),
+    )
+    assert res.stable.all()
+    return float(np.max(res.maxe))
+
+
+@pytest.mark.slow
+def test_robust_design_on_a_custom_stage_is_certified_and_covers_the_corners():
+    p = _custom()
+    box = _box(a1=0.02, a3=0.02, alpha=0.1)
+    d = synthesize_robust(p, dt=DT, uncertainty=box, udot_max=UDOT, reference=REF, max_candidates=2)
+    assert d.feasible, d.reason
+    assert d.certificate.holds and d.certificate.n_vertices == 8
+    held = [c for c in d.candidates if c["holds"]]
+    # the design is the certified candidate of smallest bound
+    assert d.certificate.tracking_bound == pytest.approx(min(c["tracking_bound"] for c in held))
+    worst = _worst_corner(p, box, d)
+    assert d.certificate.tracking_bound >= worst
+    doc = d.to_dict()
+    assert doc["certificate"]["holds"] is True and len(doc["candidates"]) == len(d.candidates)
+    json.dumps(doc)
+
+
+@pytest.mark.slow
+def test_a_box_too_wide_has_no_robust_design_with_the_reason():
+    p = _custom()
+    d = synthesize_robust(
+        p, dt=DT, uncertainty=_box(a3=0.6), udot_max=UDOT, reference=REF, max_candidates=1
+    )
+    assert not d.feasible and d.gains is None
+    assert d.reason.startswith("no robust design")
+    assert "not certified" in d.reason
+
+
+def test_bad_arguments_are_typed_errors():
+    p = preset("paper_experiment")
+    with pytest.raises(InputError, match="UncertaintyBox"):
+        synthesize_robust(p, dt=DT, uncertainty=None, udot_max=UDOT, reference=REF)
+    with pytest.raises(InputError, match="max_candidates"):
+        synthesize_robust(
+            p, dt=DT, uncertainty=_box(a1=0.02), udot_max=UDOT, reference=REF, max_candidates=0
+        )
+
+
+def _cli(*argv, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-m", "bwdesign", *argv], capture_output=True, text=True, cwd=cwd
+    )
+
+
+def _stage_with_box(tmp_path, box_text):
+    from bwdesign.model.stage_presets import stage_preset_path
+
+    text = stage_preset_path("paper_experiment").read_text() + "\n[uncertainty]\n" + box_text
+    f = tmp_path / "stage.toml"
+    f.write_text(text)
+    return f
+
+
+@pytest.mark.slow
+def test_cli_synthesize_robust(tmp_path):
+    f = _stage_with_box(tmp_path, "a3 = { rel = 0.02 }\nalpha = { rel = 0.1 }\n")
+    r = _cli("synthesize", "--plant", str(f), "--robust", "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["robust_design"]["feasible"] is True
+    assert doc["robust_design"]["certificate"]["n_vertices"] == 4
+    r = _cli("synthesize", "--plant", str(f), "--robust")
+    assert r.returncode == 0 and "robust: yes" in r.stdout
+
+
+def test_cli_robust_needs_a_box_and_refuses_a_tier(tmp_path):
+    r = _cli("synthesize", "--plant", "paper_experiment", "--robust", "--udot-max", "100")
+    assert r.returncode == 2 and r.stderr.startswith("error:") and r.stderr.count("\n") == 1
+    f = _stage_with_box(tmp_path, "")
+    r = _cli("synthesize", "--plant", str(f), "--robust")
+    assert r.returncode == 2 and "[uncertainty]" in r.stderr
+    f = _stage_with_box(tmp_path, "a3 = { rel = 0.02 }\n")
+    r = _cli("synthesize", "--plant", str(f), "--robust", "--tier", "sector")
+    assert r.returncode == 2 and "--tier and --robust" in r.stderr
+
+
+def test_cli_synthesize_per_tier():
+    r = _cli(
+        "synthesize", "--plant", "paper_experiment", "--udot-max", "1e-3", "--tier", "theorem1"
+    )
+    assert r.returncode == 0, r.stderr
+    assert "theorem1" in r.stdout and "feasible: yes" in r.stdout
+    r = _cli("synthesize", "--plant", "paper_experiment", "--udot-max", "100", "--tier", "sampled")
+    assert r.returncode == 2 and "dt" in r.stderr
+
+
+def test_simulate_tuning_digital_is_chosen_against_the_files_box(tmp_path):
+    f = _stage_with_box(tmp_path, "a1 = { rel = 0.03 }\na2 = { rel = 0.05 }\n")
+    r = _cli("simulate", "--plant", str(f), "--tuning", "digital", "--duration", "0.05", "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    tuning = doc["tuning"]
+    assert tuning["against"] == "[uncertainty]"
+    assert tuning["mismatch"] == pytest.approx({"a1": 0.03, "a2": 0.05})
