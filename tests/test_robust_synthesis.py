@@ -156,6 +156,8 @@ def test_cli_robust_needs_a_box_and_refuses_a_tier(tmp_path):
     f = _stage_with_box(tmp_path, "a3 = { rel = 0.02 }\n")
     r = _cli("synthesize", "--plant", str(f), "--robust", "--tier", "sector")
     assert r.returncode == 2 and "--tier and --robust" in r.stderr
+    r = _cli("synthesize", "--plant", "paper_experiment", "--udot-max", "100", "--observer", "phdo")
+    assert r.returncode == 2 and "--observer applies to --robust only" in r.stderr
 
 
 def test_cli_synthesize_per_tier():
@@ -176,3 +178,69 @@ def test_simulate_tuning_digital_is_chosen_against_the_files_box(tmp_path):
     tuning = doc["tuning"]
     assert tuning["against"] == "[uncertainty]"
     assert tuning["mismatch"] == pytest.approx({"a1": 0.03, "a2": 0.05})
+
+
+def test_phdo_robust_certificate_needs_the_tunings_split():
+    p = preset("paper_experiment")
+    from bwdesign import certify_robust
+
+    with pytest.raises(InputError, match="l3 = 0"):
+        certify_robust(
+            p,
+            (786.2, 28982.94, -100.0, -682.09),
+            dt=DT,
+            uncertainty=_box(a3=0.02),
+            udot_max=UDOT,
+            reference=REF,
+            lambda1=250.0,
+            lambda2=250.0,
+            observer="phdo",
+        )
+    with pytest.raises(InputError, match="observer"):
+        synthesize_robust(
+            p, dt=DT, uncertainty=_box(a3=0.02), udot_max=UDOT, reference=REF, observer="ukf"
+        )
+
+
+@pytest.mark.slow
+def test_phdo_robust_loop_covers_brute_force_corners_on_a_custom_stage():
+    from bwdesign import certify_robust
+    from bwdesign.observers.gains import disturbance_gains_from
+
+    p = _custom()
+    box = _box(a1=0.02, a3=0.03, beta=0.1)
+    gains = disturbance_gains_from((786.2, 28982.94, -782.0931942250238))
+    loop = {"lambda1": 250.0, "lambda2": 250.0, "integral_rate": 125.0}
+    rc = certify_robust(
+        p,
+        gains,
+        dt=DT,
+        uncertainty=box,
+        udot_max=UDOT,
+        reference=REF,
+        delay=True,
+        observer="phdo",
+        interior_samples=4,
+        **loop,
+    )
+    assert rc.holds, rc.status
+    ctrl = make_controller(p, form="discrete", dt=DT, **loop)
+    xd, vd, ad = (float(v[0]) for v in REF.evaluate(np.array([0.0])))
+    rng = np.random.default_rng(3)
+    plants = box.vertices(p) + box.sample(p, rng, 4)
+    res = simulate_batch(
+        p,
+        REF,
+        plants,
+        dt=DT,
+        duration=3.0,
+        controller=ctrl,
+        gains=gains,
+        observer="phdo",
+        delay=True,
+        x0=[xd, vd, 0.0],
+        xhat0=[xd, vd, 0.0],
+        u_prev=float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad])),
+    )
+    assert res.stable.all()
+    assert rc.tracking_bound >= float(np.max(res.maxe))

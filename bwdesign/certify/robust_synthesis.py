@@ -38,7 +38,7 @@ from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import check_gains
+from ..observers.gains import check_gains, disturbance_gains_from
 from .robust import RobustCertificate, certify_robust
 
 __all__ = ["RobustDesign", "synthesize_robust"]
@@ -52,8 +52,10 @@ class RobustDesign:
     ----------
     feasible : bool
         Some candidate's robust certificate holds.
-    gains : tuple of 3 floats or None
-        Continuous observer gains of the design (1/s, 1/s^2, 1/s).
+    gains : tuple of 3 (PHSO) or 4 (PHDO) floats, or None
+        Continuous observer gains of the design (1/s, 1/s^2, 1/s[, 1/s]).
+    observer : str
+        ``"phso"`` or ``"phdo"``.
     lambda1, lambda2, integral_rate : float or None
         Discrete eq. (12) constants (1/s).
     delay : bool
@@ -69,7 +71,7 @@ class RobustDesign:
     """
 
     feasible: bool
-    gains: tuple[float, float, float] | None
+    gains: tuple[float, ...] | None
     lambda1: float | None
     lambda2: float | None
     integral_rate: float | None
@@ -78,10 +80,12 @@ class RobustDesign:
     tuning: DigitalTuning
     candidates: tuple[dict[str, Any], ...] = field(default_factory=tuple)
     reason: str = ""
+    observer: str = "phso"
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "feasible": self.feasible,
+            "observer": self.observer,
             "gains": None if self.gains is None else list(self.gains),
             "lambda1": self.lambda1,
             "lambda2": self.lambda2,
@@ -162,6 +166,7 @@ def synthesize_robust(
     extra_gains: tuple[Any, ...] = (),
     interior_samples: int = 8,
     seed: int = 0,
+    observer: str = "phso",
 ) -> RobustDesign:
     """Observer gains and eq. (12) constants certified over every plant in a box.
 
@@ -189,6 +194,10 @@ def synthesize_robust(
         More observer gains to certify with the tuning's law.
     interior_samples, seed : int
         Passed to :func:`certify_robust`.
+    observer : {"phso", "phdo"}
+        The loop's observer; the PHDO gets ``(l1, l2, 0, l3)`` of each candidate
+        (:func:`~bwdesign.observers.gains.disturbance_gains_from`) and its lumped
+        certificate (:func:`certify_robust`, ``observer="phdo"``).
 
     Returns
     -------
@@ -198,6 +207,8 @@ def synthesize_robust(
     """
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
+    if observer not in ("phso", "phdo"):
+        raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
     if isinstance(max_candidates, bool) or not isinstance(max_candidates, int):
         raise InputError(f"max_candidates must be an integer >= 1, got {max_candidates!r}")
     if max_candidates < 1:
@@ -219,6 +230,8 @@ def synthesize_robust(
         )
     results: list[tuple[dict[str, Any], RobustCertificate]] = []
     for c in cands:
+        if observer == "phdo":
+            c["gains"] = disturbance_gains_from(c["gains"])
         rc = certify_robust(
             params,
             c["gains"],
@@ -233,6 +246,7 @@ def synthesize_robust(
             noise_max=noise_max,
             interior_samples=interior_samples,
             seed=seed,
+            observer=observer,
         )
         c.update(
             holds=rc.holds,
@@ -263,6 +277,7 @@ def synthesize_robust(
             tuning=tuning,
             candidates=tuple(c for c, _ in results),
             reason=reason,
+            observer=observer,
         )
     reason = (
         f"no robust design: none of the {len(results)} candidates is certified over the box ("
@@ -284,4 +299,5 @@ def synthesize_robust(
         tuning=tuning,
         candidates=tuple(c for c, _ in results),
         reason=reason,
+        observer=observer,
     )

@@ -103,6 +103,13 @@ def synthesize_args(p: argparse.ArgumentParser) -> None:
         metavar="N",
         help="with --robust: sensor noise bound |n| <= N (length unit) of the certified bounds",
     )
+    p.add_argument(
+        "--observer",
+        choices=("phso", "phdo"),
+        default=None,
+        help="with --robust: the loop's observer (default phso; phdo: the disturbance observer "
+        "with the tuning's (l1, l2, 0, l3), certified on its lumped error)",
+    )
 
 
 def _num(x: float | None, fmt: str = ".4g") -> str:
@@ -259,6 +266,8 @@ def run_synthesize(args: argparse.Namespace) -> int:
         args.pole_radius = stage.default(
             args, "pole_radius", "[synthesis]", spec.get("pole_radius")
         )
+    if args.observer is not None and not args.robust:
+        raise UsageError("--observer applies to --robust only")
     if args.robust:
         if args.tier is not None:
             raise UsageError(

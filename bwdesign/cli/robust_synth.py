@@ -46,7 +46,10 @@ def _print(design: RobustDesign, stage: Stage, udot: float) -> None:
     widths = ", ".join(
         f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in box.bounds(p).items() if lo != hi
     )
-    print(f"plant: {p.name or '(unnamed)'}   robust design over the box: {widths}")
+    print(
+        f"plant: {p.name or '(unnamed)'}   observer: {design.observer}   robust design over "
+        f"the box: {widths}"
+    )
     print(
         f"{'omega_o (rad/s)':>15} {'lambda (1/s)':>12} {'margins':>8} {'holds':>6} "
         f"{'|x1-x_d| <=':>12} {'|x1hat-x1| <=':>14} {'|x3hat-x3| <=':>14}  origin"
@@ -88,6 +91,7 @@ def run_robust(args: argparse.Namespace, stage: Stage) -> int:
         udot_max=args.udot_max,
         reference=cfg.reference,
         noise_max=args.noise_max,
+        observer=args.observer or "phso",
     )
     if args.json:
         doc = {"robust_design": design.to_dict(), "udot_max": args.udot_max}
