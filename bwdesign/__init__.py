@@ -9,7 +9,6 @@ from .certify.disturbance import LumpedCertificate, certify_disturbance
 from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
 from .certify.robust import RobustCertificate, certify_robust
-from .certify.robust_synthesis import RobustDesign, synthesize_robust
 from .certify.synthesis import synthesize
 from .certify.tiers import certify, certify_discrete
 from .codegen.export import CExport, export_c
@@ -46,6 +45,7 @@ from .sim.closed_loop import simulate
 from .sim.continuous import simulate_continuous
 from .sim.metrics import Metrics, steady_state_window, tracking_metrics
 from .sim.result import SimulationResult
+from .sim.robust_design import RobustDesign, synthesize_robust
 from .sim.start import start_on_reference
 
 __all__ = [

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from bwdesign import Sine, UncertaintyBox, preset
-from bwdesign.certify.robust_synthesis import synthesize_robust
+from bwdesign.sim.robust_design import synthesize_robust
 from bwdesign.control.controllers import make_controller
 from bwdesign.control.tuning import digital_tuning
 from bwdesign.errors import InputError
@@ -73,6 +73,7 @@ def _worst_corner(params, box, design):
         duration=3.0,
         controller=ctrl,
         gains=design.gains,
+        observer=design.observer,
         delay=design.delay,
         x0=[xd, vd, 0.0],
         xhat0=[xd, vd, 0.0],
@@ -88,11 +89,15 @@ def test_robust_design_on_a_custom_stage_is_certified_and_covers_the_corners():
     box = _box(a1=0.02, a3=0.02, alpha=0.1)
     d = synthesize_robust(p, dt=DT, uncertainty=box, udot_max=UDOT, reference=REF, max_candidates=2)
     assert d.feasible, d.reason
+    assert d.observer == "phdo" and len(d.gains) == 4 and d.gains[2] == 0.0
     assert d.certificate.holds and d.certificate.n_vertices == 8
-    held = [c for c in d.candidates if c["holds"]]
+    held = [c for c in d.candidates if c["holds"] and c["envelope_kept"]]
     # the design is the certified candidate of smallest bound
     assert d.certificate.tracking_bound == pytest.approx(min(c["tracking_bound"] for c in held))
     worst = _worst_corner(p, box, d)
+    chosen = next(c for c in held if c["tracking_bound"] == d.certificate.tracking_bound)
+    assert chosen["simulated_maxe"] == pytest.approx(worst, rel=1e-12)
+    assert chosen["simulated_udot_max"] <= UDOT  # the envelope the certificate assumes held
     assert d.certificate.tracking_bound >= worst
     doc = d.to_dict()
     assert doc["certificate"]["holds"] is True and len(doc["candidates"]) == len(d.candidates)
@@ -103,11 +108,11 @@ def test_robust_design_on_a_custom_stage_is_certified_and_covers_the_corners():
 def test_a_box_too_wide_has_no_robust_design_with_the_reason():
     p = _custom()
     d = synthesize_robust(
-        p, dt=DT, uncertainty=_box(a3=0.6), udot_max=UDOT, reference=REF, max_candidates=1
+        p, dt=DT, uncertainty=_box(a3=0.95), udot_max=UDOT, reference=REF, max_candidates=1
     )
     assert not d.feasible and d.gains is None
     assert d.reason.startswith("no robust design")
-    assert "not certified" in d.reason
+    assert "not certified: no common Lyapunov function" in d.reason
 
 
 def test_bad_arguments_are_typed_errors():
@@ -244,3 +249,23 @@ def test_phdo_robust_loop_covers_brute_force_corners_on_a_custom_stage():
     )
     assert res.stable.all()
     assert rc.tracking_bound >= float(np.max(res.maxe))
+
+
+@pytest.mark.slow
+def test_a_certified_phso_loop_that_chatters_at_a_corner_is_rejected():
+    # measured: with a1 high and a3 low the PHSO loop's input zig-zags at half the sample
+    # rate (thousands of V/s), far outside the envelope its certificate assumes
+    p = preset("paper_experiment")
+    d = synthesize_robust(
+        p,
+        dt=DT,
+        uncertainty=_box(a1=0.02, a3=0.02),
+        udot_max=UDOT,
+        reference=REF,
+        max_candidates=1,
+        observer="phso",
+    )
+    (c,) = d.candidates
+    assert c["holds"] and c["envelope_kept"] is False
+    assert c["simulated_udot_max"] > UDOT
+    assert not d.feasible and "rejected: at the corners the loop's input rate" in d.reason

@@ -20,7 +20,6 @@ from .linear import (
 )
 from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCertificate
 from .robust import RobustCertificate, certify_robust
-from .robust_synthesis import RobustDesign, synthesize_robust
 from .synthesis import default_pole_radius, synthesize
 from .tiers import certify, certify_discrete
 
@@ -37,8 +36,6 @@ __all__ = [
     "certify_discrete",
     "certify_robust",
     "RobustCertificate",
-    "synthesize_robust",
-    "RobustDesign",
     "synthesize",
     "default_pole_radius",
     "ErrorDynamics",

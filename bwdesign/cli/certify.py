@@ -94,7 +94,7 @@ def synthesize_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="design the sampled tracking loop (observer gains, lambda, integral rate) against "
         "the stage file's [uncertainty] box and certify it over every corner "
-        "(bwdesign.certify.robust_synthesis); needs [uncertainty], [reference] and a dt",
+        "(bwdesign.sim.robust_design); needs [uncertainty], [reference] and a dt",
     )
     p.add_argument(
         "--noise-max",
@@ -107,8 +107,8 @@ def synthesize_args(p: argparse.ArgumentParser) -> None:
         "--observer",
         choices=("phso", "phdo"),
         default=None,
-        help="with --robust: the loop's observer (default phso; phdo: the disturbance observer "
-        "with the tuning's (l1, l2, 0, l3), certified on its lumped error)",
+        help="with --robust: the loop's observer (default phdo, the disturbance observer with "
+        "the tuning's (l1, l2, 0, l3), certified on its lumped error; phso: the paper's)",
     )
 
 

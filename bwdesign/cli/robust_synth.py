@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..certify.robust_synthesis import RobustDesign, synthesize_robust
 from ..output.jsonenc import dump_json
+from ..sim.robust_design import RobustDesign, synthesize_robust
 from .args import EXIT_NO, EXIT_OK, UsageError
 from .stage import Stage
 
@@ -39,7 +39,7 @@ def _require(stage: Stage) -> None:
         )
 
 
-def _print(design: RobustDesign, stage: Stage, udot: float) -> None:
+def _print(design: RobustDesign, stage: Stage) -> None:
     p = stage.params
     lu, iu = p.length_unit, p.input_unit
     box = stage.config.uncertainty
@@ -52,20 +52,29 @@ def _print(design: RobustDesign, stage: Stage, udot: float) -> None:
     )
     print(
         f"{'omega_o (rad/s)':>15} {'lambda (1/s)':>12} {'margins':>8} {'holds':>6} "
-        f"{'|x1-x_d| <=':>12} {'|x1hat-x1| <=':>14} {'|x3hat-x3| <=':>14}  origin"
+        f"{'|x1-x_d| <=':>12} {'|x1hat-x1| <=':>14} {'|x3hat-x3| <=':>14} "
+        f"{'sim |x1-x_d|':>13} {'sim |du/dt|':>12} {'kept':>5}  origin"
     )
+
+    def num(x, fmt=".4g"):
+        return "-" if x is None else format(x, fmt)
+
     for c in design.candidates:
-
-        def num(x, fmt=".4g"):
-            return "-" if x is None else format(x, fmt)
-
+        kept = "-" if c["envelope_kept"] is None else ("yes" if c["envelope_kept"] else "no")
         print(
             f"{num(c['observer_bandwidth']):>15} {num(c['lambda']):>12} "
             f"{num(c['score'], '.3g'):>8} "
             f"{'yes' if c['holds'] else 'no':>6} {num(c['tracking_bound']):>12} "
-            f"{num(c['estimation_bound']):>14} {num(c['x3_estimation_bound']):>14}  {c['origin']}"
+            f"{num(c['estimation_bound']):>14} {num(c['x3_estimation_bound']):>14} "
+            f"{num(c['simulated_maxe']):>13} {num(c['simulated_udot_max']):>12} {kept:>5}  "
+            f"{c['origin']}"
         )
-    print(f"(bounds in {lu}; margins = worst-case min(GM, PM, DM) score over the box, >= 1 meets)")
+    print(
+        f"(bounds and simulated errors in {lu}, rates in {iu}/s; margins = worst-case min(GM, "
+        "PM, DM) score over the box, >= 1 meets; sim = the worst over the box's corners, "
+        "started on the reference, after the first period; kept = the simulated input rate "
+        "stays within the envelope the certificate assumes)"
+    )
     if design.feasible:
         rc = design.certificate
         print(f"gains l = {', '.join(f'{g:.8g}' for g in design.gains)}")
@@ -73,7 +82,7 @@ def _print(design: RobustDesign, stage: Stage, udot: float) -> None:
             f"lambda1 = lambda2 = {design.lambda1:.8g} 1/s, integral rate "
             f"{design.integral_rate} 1/s, delay {'on' if design.delay else 'off'}"
         )
-        print(f"robust: yes ({design.reason}): {rc.status}, for |u'| <= {udot:g} {iu}/s")
+        print(f"robust: yes ({design.reason}): {rc.status}")
     else:
         print(f"robust: no: {design.reason}")
 
@@ -91,7 +100,7 @@ def run_robust(args: argparse.Namespace, stage: Stage) -> int:
         udot_max=args.udot_max,
         reference=cfg.reference,
         noise_max=args.noise_max,
-        observer=args.observer or "phso",
+        observer=args.observer or "phdo",
     )
     if args.json:
         doc = {"robust_design": design.to_dict(), "udot_max": args.udot_max}
@@ -102,5 +111,5 @@ def run_robust(args: argparse.Namespace, stage: Stage) -> int:
         note = stage.note()
         if note is not None:
             print(note)
-        _print(design, stage, args.udot_max)
+        _print(design, stage)
     return EXIT_OK if design.feasible else EXIT_NO

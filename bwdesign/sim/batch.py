@@ -60,6 +60,9 @@ class BatchResult:
         Tracking-error statistics over ``window`` (length unit); NaN when unstable.
     estimation_rmse : ndarray, shape (N, 3)
         RMS of ``xhat - x`` per state over ``window``; NaN when unstable.
+    input_rate_max : ndarray
+        Largest ``|u_k - u_{k-1}| / dt`` of the applied input over ``window``
+        (input unit/s); NaN when unstable.
     window : (float, float)
         Metrics window (s).
     samples : int
@@ -74,6 +77,7 @@ class BatchResult:
     me: np.ndarray
     rmse: np.ndarray
     estimation_rmse: np.ndarray
+    input_rate_max: np.ndarray
     window: tuple[float, float]
     samples: int
     settings: dict[str, Any] = field(repr=False)
@@ -314,6 +318,7 @@ def simulate_batch(
     sum_sq = np.zeros(N)
     max_abs = np.zeros(N)
     est_sq = [np.zeros(N), np.zeros(N), np.zeros(N)]  # one contiguous array per state
+    du_max = np.zeros(N)
     count = 0
 
     def law(a, b, c, i):
@@ -381,6 +386,8 @@ def simulate_batch(
                 if compensate_delay:
                     u_next = law(h1, h2, hw, k + 1)
                 ua = u_next
+            if in_win[k]:
+                np.maximum(du_max, np.abs(applied - up), out=du_max)
             up = applied
             ok = (
                 (np.abs(x1) <= limit)
@@ -403,6 +410,7 @@ def simulate_batch(
     rmse = np.where(stable, np.sqrt(sum_sq / count), np.nan)
     maxe = np.where(stable, max_abs, np.nan)
     est = np.where(stable[:, None], np.sqrt(np.stack(est_sq, axis=1) / count), np.nan)
+    rate = np.where(stable, du_max / dt, np.nan)
     settings = {
         "plant": params.name,
         "reference": reference.to_dict(),
@@ -424,6 +432,7 @@ def simulate_batch(
         me=me,
         rmse=rmse,
         estimation_rmse=est,
+        input_rate_max=rate,
         window=(float(win[0]), float(win[1])),
         samples=n,
         settings=settings,
