@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 
 from bwdesign import Sine, UncertaintyBox, preset
-from bwdesign.sim.robust_design import synthesize_robust
 from bwdesign.control.controllers import make_controller
 from bwdesign.control.tuning import digital_tuning
 from bwdesign.errors import InputError
 from bwdesign.sim.batch import simulate_batch
+from bwdesign.sim.robust_design import synthesize_robust
 
 DT = 2e-4
 REF = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
