@@ -9,7 +9,9 @@ the end, so an error never leaves a half-written report, and no file bwdesign
 did not write is ever touched.
 
 The numbers in ``certificate.json`` come from :func:`certificate_document`,
-which the determinism test re-runs and compares with the committed file.
+which the determinism test re-runs and compares with the committed file, and
+from the report's own sections (:data:`REPORT_SECTIONS`: the synthesis per
+tier, the sweep, the robust certificate), which :func:`build_report` adds.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from .document import Document
 from .document import fmt as _fmt
 from .robust import robust_section
 from .sweep import sweep_section
+from .tiers import synthesize_per_tier, tier_synthesis_section
 from .tracking import TrackingRun, input_limits, required_input, tracking_runs, tracking_section
 from .tracking import limits_text as _limits_text
 
@@ -49,6 +52,10 @@ __all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DEC
 
 #: Decay rate (1/s) requested from synthesis when the config has no [synthesis] decay.
 DEFAULT_DECAY = 100.0
+
+#: Entries of ``certificate.json`` that :func:`build_report` adds to
+#: :func:`certificate_document`'s (each from its own section's module).
+REPORT_SECTIONS = ("tier_synthesis", "sweep", "robust")
 
 #: Files every report holds (checked against foreign files before any work).
 REPORT_FILES = ("report.md", "report.html", "certificate.json")
@@ -479,6 +486,18 @@ def build_report(
     if configured is not None:
         t1 = configured.tier("theorem1")
         doc.para(f"Theorem 1 for the configured gains: {t1.status}.")
+
+    # -- synthesis per tier ----------------------------------------------------
+    say("synthesis per tier (the largest envelope synthesised gains reach)")
+    per_tier = synthesize_per_tier(
+        params,
+        udot_max=v,
+        decay=req["decay"],
+        dt=dt,
+        pole_radius=req["pole_radius"],
+        allow_unbounded=allow_unbounded,
+    )
+    cert_doc["tier_synthesis"] = tier_synthesis_section(doc, params, per_tier, v)
 
     # -- linear analysis -----------------------------------------------------
     say("linear analysis of the observer error dynamics")
