@@ -236,3 +236,29 @@ def test_tier_search_brackets_the_feasibility_edge():
         bad = [u for u, res in tried if not res.feasible] + ([] if start <= edge else [start])
         assert max(ok) <= edge < min(bad) <= max(ok) * (1 + SEARCH_RTOL)
         assert calls == [u for u, _ in tried] and len(calls) < 20
+
+
+def test_batch_estimation_maxe_is_the_scalar_runs_max_error():
+    """The robust table's simulated column: simulate_batch's steady-state max |xhat - x|."""
+    import numpy as np
+
+    from bwdesign import preset, simulate
+    from bwdesign.control.controllers import make_controller
+    from bwdesign.model.references import Sine
+    from bwdesign.sim.batch import simulate_batch
+
+    p = preset("paper_experiment")
+    corners = [p.replace(a1=1.02 * p.a1, alpha=0.9 * p.alpha), p.replace(a3=0.98 * p.a3)]
+    ref = Sine(amplitude=80.0, offset=100.0, frequency=5.0)
+    ctrl = make_controller(p, 250.0, 250.0, form="discrete", dt=2e-4, integral_rate=125.0)
+    kw = dict(dt=2e-4, duration=0.6, controller=ctrl, gains=(786.2, 28982.94, -782.09))
+    batch = simulate_batch(p, ref, corners, noise_std=0.05, seeds=[3, 4], **kw)
+    assert batch.estimation_maxe.shape == (2, 3)
+    assert np.all(batch.estimation_maxe >= batch.estimation_rmse)
+    for i, tp in enumerate(corners):
+        r = simulate(p, ref, true_params=tp, noise_std=0.05, seed=[3, 4][i], **kw)
+        t = np.asarray(r.t)
+        sel = (t >= batch.window[0] - 1e-12) & (t <= batch.window[1] + 1e-12)
+        err = np.abs(np.asarray(r.xhat) - np.asarray(r.x))[sel].max(axis=0)
+        assert batch.estimation_maxe[i] == pytest.approx(err, rel=1e-9)
+        assert batch.maxe[i] == pytest.approx(r.metrics.maxe, rel=1e-9)

@@ -15,8 +15,9 @@ Not batched (use :func:`simulate`): the UKF, observer objects or factories, and
 controllers with ``hysteresis_jump``.
 
 Only what a sweep needs is kept per scenario: the steady-state window's
-statistics (MAXE, ME, RMSE, estimation RMSE per state), stability and the
-divergence status; a scenario's full record is replayed with :func:`simulate`.
+statistics (MAXE, ME, RMSE, estimation RMSE and max error per state), stability
+and the divergence status; a scenario's full record is replayed with
+:func:`simulate`.
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ class BatchResult:
         Tracking-error statistics over ``window`` (length unit); NaN when unstable.
     estimation_rmse : ndarray, shape (N, 3)
         RMS of ``xhat - x`` per state over ``window``; NaN when unstable.
+    estimation_maxe : ndarray, shape (N, 3)
+        Max of ``|xhat - x|`` per state over ``window``; NaN when unstable.
     window : (float, float)
         Metrics window (s).
     samples : int
@@ -74,6 +77,7 @@ class BatchResult:
     me: np.ndarray
     rmse: np.ndarray
     estimation_rmse: np.ndarray
+    estimation_maxe: np.ndarray
     window: tuple[float, float]
     samples: int
     settings: dict[str, Any] = field(repr=False)
@@ -314,6 +318,7 @@ def simulate_batch(
     sum_sq = np.zeros(N)
     max_abs = np.zeros(N)
     est_sq = [np.zeros(N), np.zeros(N), np.zeros(N)]  # one contiguous array per state
+    est_max = [np.zeros(N), np.zeros(N), np.zeros(N)]
     count = 0
 
     def law(a, b, c, i):
@@ -353,9 +358,12 @@ def simulate_batch(
                 sum_abs += a
                 sum_sq += e * e
                 np.maximum(max_abs, a, out=max_abs)  # NaN propagates: unstable, masked below
-                for acc, hh_, xx_ in zip(est_sq, (h1, h2, hw), (x1, x2, x3), strict=True):
+                for acc, mx, hh_, xx_ in zip(
+                    est_sq, est_max, (h1, h2, hw), (x1, x2, x3), strict=True
+                ):
                     d = hh_ - xx_
                     acc += d * d
+                    np.maximum(mx, np.abs(d), out=mx)
                 count += 1
             if not delay:
                 applied = law(h1, h2, hw, k)
@@ -403,6 +411,7 @@ def simulate_batch(
     rmse = np.where(stable, np.sqrt(sum_sq / count), np.nan)
     maxe = np.where(stable, max_abs, np.nan)
     est = np.where(stable[:, None], np.sqrt(np.stack(est_sq, axis=1) / count), np.nan)
+    est_max = np.where(stable[:, None], np.stack(est_max, axis=1), np.nan)
     settings = {
         "plant": params.name,
         "reference": reference.to_dict(),
@@ -424,6 +433,7 @@ def simulate_batch(
         me=me,
         rmse=rmse,
         estimation_rmse=est,
+        estimation_maxe=est_max,
         window=(float(win[0]), float(win[1])),
         samples=n,
         settings=settings,
