@@ -262,3 +262,47 @@ def test_batch_estimation_maxe_is_the_scalar_runs_max_error():
         err = np.abs(np.asarray(r.xhat) - np.asarray(r.x))[sel].max(axis=0)
         assert batch.estimation_maxe[i] == pytest.approx(err, rel=1e-9)
         assert batch.maxe[i] == pytest.approx(r.metrics.maxe, rel=1e-9)
+
+
+def test_tier_rows_when_synthesis_says_no(monkeypatch):
+    """theorem1 below the stage's rate: gains fetched at half its envelope; no design: no gains."""
+    from types import SimpleNamespace
+
+    import bwdesign.report.tiers as tiers
+    from bwdesign import preset
+
+    calls = []
+
+    def fake(params, *, udot_max, decay, pole_radius, dt, allow_unbounded, tier):
+        calls.append((tier, udot_max))
+        edge = {"theorem1": 100.0, "lipschitz": 0.0, "sector": 50.0}[tier]
+        ok = udot_max < edge
+        # gains asked for a larger rate reach a larger envelope
+        rep = SimpleNamespace(tier=lambda name: SimpleNamespace(max_udot=edge + udot_max))
+        return SimpleNamespace(
+            feasible=ok,
+            gains=(1.0, 2.0, 3.0) if ok else None,
+            discrete_gains=None,
+            max_udot=edge,
+            report=rep if ok else None,
+            reason=f"{tier} at {udot_max:g}: {'yes' if ok else 'no'}",
+        )
+
+    monkeypatch.setattr(tiers, "synthesize", fake)
+    rows = {
+        r.tier: r
+        for r in tiers.synthesize_per_tier(preset("paper_experiment"), udot_max=400.0, decay=10.0)
+    }
+    assert list(rows) == ["theorem1", "lipschitz", "sector"]  # no dt: no sampled tier
+    t1 = rows["theorem1"]
+    assert calls[:2] == [("theorem1", 400.0), ("theorem1", 50.0)]
+    assert not t1.feasible and t1.gains == (1.0, 2.0, 3.0) and t1.envelope == 100.0
+    assert t1.requested == 50.0 and t1.syntheses == 2 and t1.theorem1_unscaled == 150.0
+    lip = rows["lipschitz"]
+    assert lip.gains is None and lip.envelope == 0.0 and lip.requested is None
+    assert lip.reason == "lipschitz at 400: no" and lip.syntheses == 1
+    sec = rows["sector"]  # infeasible at 400: searched downwards, 25 is feasible
+    assert sec.searched and not sec.feasible
+    assert 50.0 / (1 + tiers.SEARCH_RTOL) <= sec.requested < 50.0  # the bisection's edge
+    assert sec.envelope == 50.0 + sec.requested  # the best of the feasible syntheses
+    assert sec.to_dict()["envelope_unbounded"] is False
