@@ -81,7 +81,7 @@ def test_report_states_the_initial_state(paper_report):
 
 def test_report_commands_reproduce_its_runs(paper_report, capsys):
     md, _, runs = paper_report
-    assert len(runs) == 4
+    assert len(runs) == 6
     for run in runs:
         assert run.command_text in md, run.label
         r = run.result
@@ -95,6 +95,34 @@ def test_report_commands_reproduce_its_runs(paper_report, capsys):
         for k in ("maxe", "me", "rmse"):
             assert got["metrics"][k] == pytest.approx(getattr(r.metrics, k), rel=1e-9, abs=1e-12)
         assert got["estimation_rmse"]["x3"] == pytest.approx(r.estimation_rmse[2], abs=1e-9)
+
+
+def test_report_runs_the_phdo_with_gains_from_the_one_helper(paper_report):
+    """{eq. 12, digital tuning} x {PHSO, ESO, PHDO}; the PHDO's gains are (l1, l2, 0, l3)."""
+    from bwdesign.observers.gains import disturbance_gains_from
+
+    md, _, runs = paper_report
+    config = load_config(CONFIG)
+    tuning = digital_tuning(config.plant, config.dt)
+    labels = [run.label for run in runs]
+    assert labels == [
+        f"{o} ({law})" for law in ("eq. 12", "digital tuning") for o in ("PHSO", "ESO", "PHDO")
+    ]
+    want = {
+        "PHDO (eq. 12)": (8.0, 64.0, 0.0, -512.0),
+        "PHDO (digital tuning)": tuning.observer_gains_for("phdo"),
+    }
+    assert want["PHDO (digital tuning)"] == disturbance_gains_from(tuning.gains)
+    for run in runs:
+        gains = tuple(float(g) for g in run.command[run.command.index("--gains") + 1].split(","))
+        assert tuple(run.result.settings["gains"]) == pytest.approx(gains, rel=1e-15)
+        if run.label in want:
+            assert run.command[run.command.index("--observer") + 1] == "phdo"
+            assert gains == pytest.approx(want[run.label], rel=1e-15)
+            g = ", ".join(f"{v:.6g}" for v in want[run.label])
+            assert f"{run.label}: ({g})" in md
+            assert f"| {run.label} | {_fmt4(run.result.metrics.maxe)} |" in md
+    assert "bwdesign.observers.gains.disturbance_gains_from" in md
 
 
 def test_simulate_from_rest_is_the_default_and_said(capsys):

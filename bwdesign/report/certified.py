@@ -9,12 +9,13 @@ the end, so an error never leaves a half-written report, and no file bwdesign
 did not write is ever touched.
 
 The numbers in ``certificate.json`` come from :func:`certificate_document`,
-which the determinism test re-runs and compares with the committed file.
+which the determinism test re-runs and compares with the committed file, and
+from the report's own sections (:data:`REPORT_SECTIONS`: the synthesis per
+tier, the sweep, the robust certificate), which :func:`build_report` adds.
 """
 
 from __future__ import annotations
 
-import math
 import platform
 import sys
 from collections.abc import Callable
@@ -23,8 +24,6 @@ from datetime import UTC, datetime
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from ..certify.linear import error_dynamics, hysteresis_bode
 from ..certify.results import CertificateReport, SynthesisResult
@@ -42,14 +41,21 @@ from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from ..sim.sweep import bounds_from_config
 from .document import Document
+from .document import fmt as _fmt
 from .robust import robust_section
 from .sweep import sweep_section
-from .tracking import TrackingRun, input_limits, required_input, tracking_runs
+from .tiers import synthesize_per_tier, tier_synthesis_section
+from .tracking import TrackingRun, input_limits, required_input, tracking_runs, tracking_section
+from .tracking import limits_text as _limits_text
 
 __all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DECAY"]
 
 #: Decay rate (1/s) requested from synthesis when the config has no [synthesis] decay.
 DEFAULT_DECAY = 100.0
+
+#: Entries of ``certificate.json`` that :func:`build_report` adds to
+#: :func:`certificate_document`'s (each from its own section's module).
+REPORT_SECTIONS = ("tier_synthesis", "sweep", "robust")
 
 #: Files every report holds (checked against foreign files before any work).
 REPORT_FILES = ("report.md", "report.html", "certificate.json")
@@ -221,21 +227,6 @@ def _input_document(config: StageConfig, env: Envelope, allow_unbounded: bool) -
     }
 
 
-def _fmt(x: Any, digits: int = 4) -> str:
-    if x is None:
-        return "-"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if isinstance(x, float | int | np.floating):
-        x = float(x)
-        if math.isinf(x):
-            return "unbounded" if x > 0 else "-inf"
-        if math.isnan(x):
-            return "-"
-        return f"{x:.{digits}g}"
-    return str(x)
-
-
 def _gains_text(g: Any) -> str:
     return "(" + ", ".join(f"{float(v):.6g}" for v in g) + ")" if g is not None else "-"
 
@@ -347,12 +338,6 @@ def _verdict(
     return ok, " ".join(parts)
 
 
-def _limits_text(limits: Any, iu: str) -> str:
-    if limits is None:
-        return "none"
-    return f"{_fmt(limits[0])} .. {_fmt(limits[1])} {iu}"
-
-
 def _progress(quiet: bool) -> Callable[[str], None]:
     def say(msg: str) -> None:
         if not quiet:
@@ -393,7 +378,7 @@ def build_report(
     v = env.udot_max
     g_loop = config.gains if config.gains is not None else synth.gains
     tuning = digital_tuning(params, dt)
-    say("simulating the tracking loop at the envelope (PHSO and ESO)")
+    say("simulating the tracking loop at the envelope (PHSO, ESO and PHDO)")
     runs = tracking_runs(config, gains=g_loop, tuning=tuning, allow_unbounded=allow_unbounded)
     ok, verdict = _verdict(config, configured, synth, v, cert_doc["input"], runs)
 
@@ -502,6 +487,18 @@ def build_report(
         t1 = configured.tier("theorem1")
         doc.para(f"Theorem 1 for the configured gains: {t1.status}.")
 
+    # -- synthesis per tier ----------------------------------------------------
+    say("synthesis per tier (the largest envelope synthesised gains reach)")
+    per_tier = synthesize_per_tier(
+        params,
+        udot_max=v,
+        decay=req["decay"],
+        dt=dt,
+        pole_radius=req["pole_radius"],
+        allow_unbounded=allow_unbounded,
+    )
+    cert_doc["tier_synthesis"] = tier_synthesis_section(doc, params, per_tier, v)
+
     # -- linear analysis -----------------------------------------------------
     say("linear analysis of the observer error dynamics")
     doc.heading("Observer error dynamics")
@@ -607,79 +604,7 @@ def build_report(
     doc.figure("figures/loop_poles.png", "Closed-loop poles of the sampled tracking loops")
 
     # -- simulation ----------------------------------------------------------
-    doc.heading("Simulated tracking at the envelope")
-    ref = config.reference
-    first = runs[0].result
-    x0 = ", ".join(f"{x:.6g}" for x in first.settings["x0"])
-    srow = []
-    for run in runs:
-        r = run.result
-        sat = _fmt(100 * r.saturated_fraction, 3) if r.settings.get("u_limits") else "no limits"
-        if r.metrics is None:
-            srow.append([run.label, "unstable", "-", "-", "-", "-", "-", sat])
-            continue
-        er = r.estimation_rmse
-        srow.append(
-            [
-                run.label,
-                _fmt(r.metrics.maxe),
-                _fmt(r.metrics.me),
-                _fmt(r.metrics.rmse),
-                _fmt(er[0], 3),
-                _fmt(er[1], 3),
-                _fmt(er[2], 3),
-                sat,
-            ]
-        )
-    w = first.window
-    doc.para(
-        f"Reference {ref.describe()}, dt = {dt * 1e3:g} ms, {first.settings['duration']:g} s "
-        f"starting on the reference: plant state and estimate x0 = ({x0}) "
-        f"({lu}, {lu}/s, {lu}), i.e. (x_d(0), x_d'(0), 0), with the feedforward input "
-        f"{first.settings['u_prev']:.6g} {iu} held before t = 0; nominal plant, no noise; "
-        f"input limits {_limits_text(cert_doc['input']['limits'], iu)}. Metrics over the last "
-        f"two periods ({w[0]:g} .. {w[1]:g} s), in {lu}; estimation RMSE per state; "
-        "saturated = share of samples at an input limit."
-    )
-    doc.table(
-        [
-            "loop",
-            f"MAXE ({lu})",
-            f"ME ({lu})",
-            f"RMSE ({lu})",
-            "RMSE x1",
-            "RMSE x2",
-            "RMSE x3",
-            "saturated (%)",
-        ],
-        srow,
-        id="tracking",
-    )
-    doc.para(
-        "Each run is reproduced exactly by the command below it (`--start-on-reference` sets "
-        "the initial state above; the reference and any one-sided input limit come from the "
-        "config file's sections; the path is as given to `bwdesign report`):"
-    )
-    doc.pre("\n".join(f"# {run.label}\n{run.command_text}" for run in runs))
-    runs_by_label = {run.label: run.result for run in runs}
-    fig, _ = plotting.plot_tracking_comparison(runs_by_label, title="tracking at the envelope")
-    plotting.save_figure(fig, figs / "tracking.png")
-    doc.figure("figures/tracking.png", "Tracking, error and input over the metrics window")
-    curves = {}
-    for label, r in runs_by_label.items():
-        if r.stable:
-            err = np.asarray(r.xhat) - np.asarray(r.x)
-            for i in range(3):
-                curves[f"x{i + 1} | {label}"] = (np.asarray(r.t), err[:, i])
-    if curves:
-        fig, _ = plotting.plot_estimation_errors(
-            curves, title="estimation errors in the loop", ylabel=f"|x_hat - x| ({lu}, {lu}/s)"
-        )
-        plotting.save_figure(fig, figs / "estimation_errors.png")
-        doc.figure("figures/estimation_errors.png", "Estimation error of each state in the loop")
-    else:
-        doc.para("No run stayed bounded, so there is no estimation-error figure.")
-
+    tracking_section(doc, config, runs, figs)
     if config.sweep is not None:
         say(f"Monte Carlo sweep over [uncertainty]: {config.sweep['samples']} scenarios")
         cert_doc["sweep"] = sweep_section(doc, config, figs)

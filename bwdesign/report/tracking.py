@@ -1,11 +1,17 @@
 """The report's simulated tracking runs, each with the command that reproduces it.
 
 :func:`tracking_runs` simulates the tracking loop of a stage configuration the
-way the report does (eq. 12 and the digital tuning, each with the PHSO and the
-ESO, starting on the reference) and gives, for every run, the
+way the report does (eq. 12 and the digital tuning, each with the PHSO, the
+ESO and the disturbance observer PHDO, starting on the reference) and gives,
+for every run, the
 ``bwdesign simulate`` command line that reproduces it exactly: the same
 floats (``repr`` round-trips), the same initial state
 (``--start-on-reference``), the input limits and the reference of the file.
+
+The PHDO's four gains come from the 3-state gains of each law through the
+package's one helper, :func:`bwdesign.observers.gains.disturbance_gains_from`
+(``(l1, l2, 0, l3)``; for the digital tuning this is
+``DigitalTuning.observer_gains_for("phdo")``).
 """
 
 from __future__ import annotations
@@ -14,16 +20,32 @@ import math
 import shlex
 from dataclasses import dataclass
 from itertools import product
+from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ..errors import InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope, derive_envelope
+from ..observers.gains import disturbance_gains_from
 from ..sim.closed_loop import simulate
 from ..sim.result import SimulationResult
 from ..sim.start import start_on_reference
+from .document import fmt
 
-__all__ = ["TrackingRun", "tracking_runs", "input_limits", "required_input"]
+__all__ = [
+    "TrackingRun",
+    "tracking_runs",
+    "tracking_section",
+    "input_limits",
+    "limits_text",
+    "required_input",
+    "OBSERVERS",
+]
+
+#: The observers of the report's runs, in table order.
+OBSERVERS = ("phso", "eso", "phdo")
 
 
 @dataclass(frozen=True)
@@ -88,7 +110,7 @@ def tracking_runs(
     tuning: Any,
     allow_unbounded: bool = False,
 ) -> list[TrackingRun]:
-    """The report's four runs: {eq. 12, digital tuning} x {PHSO, ESO}.
+    """The report's six runs: {eq. 12, digital tuning} x {PHSO, ESO, PHDO}.
 
     Parameters
     ----------
@@ -96,9 +118,11 @@ def tracking_runs(
         Needs [sampling], [reference] and [controller]; its ``source`` is the
         ``--plant`` of the commands.
     gains : array_like, shape (3,)
-        Observer gains of the eq. 12 runs (1/s, 1/s^2, 1/s).
+        Observer gains of the eq. 12 runs (1/s, 1/s^2, 1/s); the PHDO runs with
+        ``disturbance_gains_from(gains)``.
     tuning : bwdesign.control.DigitalTuning
-        The digital tuning's constants and gains.
+        The digital tuning's constants and gains (the PHDO's from
+        ``tuning.observer_gains_for("phdo")``).
     allow_unbounded : bool
 
     Returns
@@ -129,7 +153,14 @@ def tracking_runs(
         ),
     }
     runs = []
-    for (law, kw), observer in product(laws.items(), ("phso", "eso")):
+    four = {
+        "eq. 12": disturbance_gains_from(laws["eq. 12"]["gains"]),
+        "digital tuning": tuning.observer_gains_for("phdo"),
+    }
+    for (law, base), observer in product(laws.items(), OBSERVERS):
+        kw = dict(base)
+        if observer == "phdo":
+            kw["gains"] = tuple(float(g) for g in four[law])
         r = simulate(
             params,
             ref,
@@ -155,3 +186,111 @@ def tracking_runs(
             argv.append("--allow-unbounded")
         runs.append(TrackingRun(label=f"{observer.upper()} ({law})", command=tuple(argv), result=r))
     return runs
+
+
+def limits_text(limits: Any, iu: str) -> str:
+    """Input limits ``(lo, hi)`` as ``lo .. hi unit`` ("none" without limits)."""
+    if limits is None:
+        return "none"
+    return f"{fmt(limits[0])} .. {fmt(limits[1])} {iu}"
+
+
+def tracking_section(doc: Any, config: StageConfig, runs: list[TrackingRun], figs: Path) -> None:
+    """Add the report's "Simulated tracking at the envelope" section for ``runs``.
+
+    The table (one row per run, ``id="tracking"``), the commands that reproduce
+    the runs, and the figures ``tracking.png`` and ``estimation_errors.png``
+    written into ``figs``.
+    """
+    from ..plotting import figures as plotting
+
+    params, ref, dt = config.plant, config.reference, float(config.dt)
+    lu, iu = params.length_unit, params.input_unit
+    doc.heading("Simulated tracking at the envelope")
+    first = runs[0].result
+    x0 = ", ".join(f"{x:.6g}" for x in first.settings["x0"])
+    srow = []
+    for run in runs:
+        r = run.result
+        sat = fmt(100 * r.saturated_fraction, 3) if r.settings.get("u_limits") else "no limits"
+        if r.metrics is None:
+            srow.append([run.label, "unstable", "-", "-", "-", "-", "-", sat])
+            continue
+        er = r.estimation_rmse
+        srow.append(
+            [
+                run.label,
+                fmt(r.metrics.maxe),
+                fmt(r.metrics.me),
+                fmt(r.metrics.rmse),
+                fmt(er[0], 3),
+                fmt(er[1], 3),
+                fmt(er[2], 3),
+                sat,
+            ]
+        )
+    w = first.window
+    doc.para(
+        f"Reference {ref.describe()}, dt = {dt * 1e3:g} ms, {first.settings['duration']:g} s "
+        f"starting on the reference: plant state and estimate x0 = ({x0}) "
+        f"({lu}, {lu}/s, {lu}), i.e. (x_d(0), x_d'(0), 0), with the feedforward input "
+        f"{first.settings['u_prev']:.6g} {iu} held before t = 0; nominal plant, no noise; "
+        f"input limits {limits_text(input_limits(config), iu)}. Metrics over the last "
+        f"two periods ({w[0]:g} .. {w[1]:g} s), in {lu}; estimation RMSE per state; "
+        "saturated = share of samples at an input limit."
+    )
+    phdo = [run for run in runs if run.command[run.command.index("--observer") + 1] == "phdo"]
+    if phdo:
+        doc.para(
+            "PHDO = the hysteresis observer with a disturbance state "
+            "(bwdesign.DisturbanceHysteresisObserver, states x1, x2, x3, d). Its four gains "
+            "are (l1, l2, 0, l3) from the 3-state gains of the same law, through the package's "
+            "one helper bwdesign.observers.gains.disturbance_gains_from: "
+            + "; ".join(f"{run.label}: {_gains_cell(run.command)}" for run in phdo)
+            + ". Its x3 column is the lumped estimate x3hat + d against x3 (what the law "
+            "uses); on the nominal plant without noise d stays 0 and it runs as the PHSO."
+        )
+    doc.table(
+        [
+            "loop",
+            f"MAXE ({lu})",
+            f"ME ({lu})",
+            f"RMSE ({lu})",
+            "RMSE x1",
+            "RMSE x2",
+            "RMSE x3",
+            "saturated (%)",
+        ],
+        srow,
+        id="tracking",
+    )
+    doc.para(
+        "Each run is reproduced exactly by the command below it (`--start-on-reference` sets "
+        "the initial state above; the reference and any one-sided input limit come from the "
+        "config file's sections; the path is as given to `bwdesign report`):"
+    )
+    doc.pre("\n".join(f"# {run.label}\n{run.command_text}" for run in runs))
+    runs_by_label = {run.label: run.result for run in runs}
+    fig, _ = plotting.plot_tracking_comparison(runs_by_label, title="tracking at the envelope")
+    plotting.save_figure(fig, figs / "tracking.png")
+    doc.figure("figures/tracking.png", "Tracking, error and input over the metrics window")
+    curves = {}
+    for label, r in runs_by_label.items():
+        if r.stable:
+            err = np.asarray(r.xhat) - np.asarray(r.x)
+            for i in range(3):
+                curves[f"x{i + 1} | {label}"] = (np.asarray(r.t), err[:, i])
+    if curves:
+        fig, _ = plotting.plot_estimation_errors(
+            curves, title="estimation errors in the loop", ylabel=f"|x_hat - x| ({lu}, {lu}/s)"
+        )
+        plotting.save_figure(fig, figs / "estimation_errors.png")
+        doc.figure("figures/estimation_errors.png", "Estimation error of each state in the loop")
+    else:
+        doc.para("No run stayed bounded, so there is no estimation-error figure.")
+
+
+def _gains_cell(command: tuple[str, ...]) -> str:
+    """The ``--gains`` of a run's command as ``(g1, g2, ...)`` (6 significant digits)."""
+    gains = command[command.index("--gains") + 1].split(",")
+    return "(" + ", ".join(f"{float(g):.6g}" for g in gains) + ")"

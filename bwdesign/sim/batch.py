@@ -15,8 +15,9 @@ Not batched (use :func:`simulate`): the UKF, observer objects or factories, and
 controllers with ``hysteresis_jump``.
 
 Only what a sweep needs is kept per scenario: the steady-state window's
-statistics (MAXE, ME, RMSE, estimation RMSE per state), stability and the
-divergence status; a scenario's full record is replayed with :func:`simulate`.
+statistics (MAXE, ME, RMSE, estimation RMSE and max error per state), stability
+and the divergence status; a scenario's full record is replayed with
+:func:`simulate`.
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ class BatchResult:
         Tracking-error statistics over ``window`` (length unit); NaN when unstable.
     estimation_rmse : ndarray, shape (N, 3)
         RMS of ``xhat - x`` per state over ``window``; NaN when unstable.
+    estimation_maxe : ndarray, shape (N, 3)
+        Max of ``|xhat - x|`` per state over ``window``; NaN when unstable.
     input_rate_max : ndarray
         Largest ``|u_k - u_{k-1}| / dt`` of the applied input over ``window``
         (input unit/s); NaN when unstable.
@@ -77,6 +80,7 @@ class BatchResult:
     me: np.ndarray
     rmse: np.ndarray
     estimation_rmse: np.ndarray
+    estimation_maxe: np.ndarray
     input_rate_max: np.ndarray
     window: tuple[float, float]
     samples: int
@@ -318,6 +322,7 @@ def simulate_batch(
     sum_sq = np.zeros(N)
     max_abs = np.zeros(N)
     est_sq = [np.zeros(N), np.zeros(N), np.zeros(N)]  # one contiguous array per state
+    est_max = [np.zeros(N), np.zeros(N), np.zeros(N)]
     du_max = np.zeros(N)
     count = 0
 
@@ -358,9 +363,12 @@ def simulate_batch(
                 sum_abs += a
                 sum_sq += e * e
                 np.maximum(max_abs, a, out=max_abs)  # NaN propagates: unstable, masked below
-                for acc, hh_, xx_ in zip(est_sq, (h1, h2, hw), (x1, x2, x3), strict=True):
+                for acc, mx, hh_, xx_ in zip(
+                    est_sq, est_max, (h1, h2, hw), (x1, x2, x3), strict=True
+                ):
                     d = hh_ - xx_
                     acc += d * d
+                    np.maximum(mx, np.abs(d), out=mx)
                 count += 1
             if not delay:
                 applied = law(h1, h2, hw, k)
@@ -410,6 +418,7 @@ def simulate_batch(
     rmse = np.where(stable, np.sqrt(sum_sq / count), np.nan)
     maxe = np.where(stable, max_abs, np.nan)
     est = np.where(stable[:, None], np.sqrt(np.stack(est_sq, axis=1) / count), np.nan)
+    est_max = np.where(stable[:, None], np.stack(est_max, axis=1), np.nan)
     rate = np.where(stable, du_max / dt, np.nan)
     settings = {
         "plant": params.name,
@@ -432,6 +441,7 @@ def simulate_batch(
         me=me,
         rmse=rmse,
         estimation_rmse=est,
+        estimation_maxe=est_max,
         input_rate_max=rate,
         window=(float(win[0]), float(win[1])),
         samples=n,
