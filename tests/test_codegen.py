@@ -406,6 +406,7 @@ def test_cli_json(tmp_path, capsys):
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 def test_cross_compiles_for_cortex_m4f(tmp_path, config, precision):
     export_c(config, tmp_path, precision=precision)
+    assert "bw_phdo_step" in (tmp_path / "bw.c").read_text()
     obj = tmp_path / "bw.o"
     flags = ["-mcpu=cortex-m4", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-mthumb"]
     subprocess.run(
@@ -415,3 +416,102 @@ def test_cross_compiles_for_cortex_m4f(tmp_path, config, precision):
     )
     size = subprocess.run(["arm-none-eabi-size", str(obj)], capture_output=True, text=True)
     assert size.returncode == 0 and "text" in size.stdout
+
+
+class _PhdoObserver(ctypes.Structure):
+    _fields_ = [
+        ("x", ctypes.c_double * 4),
+        ("x_prior", ctypes.c_double * 4),
+        ("x1_lo", ctypes.c_double),
+        ("u_prev", ctypes.c_double),
+        ("guard_trips", ctypes.c_ulong),
+        ("uncovered", ctypes.c_int),
+    ]
+
+
+@needs_cc
+def test_phdo_guard_and_lumped_estimate(tmp_path, config):
+    """bw_phdo_*: the runtime guard as the PHSO's, and bw_phdo_lumped = (x1, x2, x3 + d)."""
+    res = export_c(config, tmp_path)
+    lib = _shared_library(tmp_path)
+    du_max = res.summary["udot_max"] * config.dt
+    s = _PhdoObserver()
+    lib.bw_phdo_init(ctypes.byref(s))
+    lib.bw_phdo_step.argtypes = [ctypes.POINTER(_PhdoObserver), ctypes.c_double, ctypes.c_double]
+    lib.bw_phdo_step(ctypes.byref(s), 0.9 * du_max, 0.0)
+    assert (s.uncovered, s.guard_trips) == (0, 0)
+    lib.bw_phdo_step(ctypes.byref(s), 0.9 * du_max + 1.01 * du_max, 0.5)
+    assert (s.uncovered, s.guard_trips) == (1, 1)
+    py = DisturbanceHysteresisObserver(
+        config.plant, disturbance_gains_from(config.gains), config.dt
+    )
+    py.predict(0.9 * du_max)
+    py.update(0.0)
+    py.predict(0.9 * du_max + 1.01 * du_max)
+    py.update(0.5)
+    assert list(s.x) == py.x.tolist() and py.x[3] != 0.0
+    xhat = (ctypes.c_double * 3)()
+    lib.bw_phdo_lumped(ctypes.byref(s), xhat)
+    assert list(xhat) == py.x_lumped.tolist()
+    header = (tmp_path / "bw.h").read_text()
+    assert "PHDO lumped error CERTIFIED by the sampled tier" in header
+    assert "void bw_phdo_lumped(const bw_phdo_observer *s, bw_real xhat[3]);" in header
+
+
+@needs_cc
+def test_harness_default_observer_phdo(tmp_path, capsys, config):
+    """export-c --observer phdo: the harness runs the PHDO without a mode argument."""
+    code = main(["export-c", "--config", str(CONFIG), "--out", str(tmp_path), "--observer", "phdo"])
+    assert code == 0 and "PHDO lumped error by the sampled tier" in capsys.readouterr().out
+    exe = _build(tmp_path)
+    u = 70 + 40 * np.sin(2 * np.pi * np.arange(2000) * config.dt)
+    z = 1.39 * u - 1.0
+    text = "\n".join(f"{a!r},{b!r}" for a, b in zip(u.tolist(), z.tolist(), strict=True))
+    out = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True)
+    got = np.loadtxt(out.stdout.splitlines(), delimiter=",")
+    gains = disturbance_gains_from(config.gains)
+    ref = DisturbanceHysteresisObserver(config.plant, gains, config.dt).batch_filter(z, u)
+    assert got.shape == (2000, 4) and np.array_equal(got, ref)
+    doc = json.loads((tmp_path / "export.json").read_text())
+    assert doc["harness_observer"] == "phdo"
+    assert doc["observers"]["phdo"]["gains"] == list(gains)
+    assert doc["observers"]["phdo"]["certificate"]["holds"]
+    assert doc["certificate"]["phdo"]["certified"] and doc["certificate"]["certified"]
+
+
+def test_phdo_gains_per_source(tmp_path, config):
+    """--tuning digital: observer_gains_for("phdo"); --synthesize: the synthesised K lumped."""
+    from bwdesign import digital_tuning
+
+    res = export_c(config, tmp_path / "digital", gains_from="digital")
+    g = digital_tuning(config.plant, config.dt).observer_gains_for("phdo")
+    phdo = res.document["observers"]["phdo"]
+    assert phdo["gains"] == list(g) and "observer_gains_for('phdo')" in phdo["gains_from"]
+    assert phdo["K"] == DisturbanceHysteresisObserver(config.plant, g, config.dt).K.tolist()
+    res = export_c(config, tmp_path / "syn", gains_from="synthesize")
+    k1, k2, k3 = res.document["observers"]["phso"]["K"]
+    phdo = res.document["observers"]["phdo"]
+    assert phdo["K"] == [k1, k2, 0.0, k3]  # the exported PHSO's observable poles
+    assert phdo["gains"] == list(disturbance_gains_from(res.document["gains"]))
+    assert "synthesised gains in the lumped form" in phdo["gains_from"]
+    assert phdo["certificate"]["holds"] and res.certified
+
+
+def test_uncertified_phdo_is_refused(tmp_path, config, monkeypatch):
+    """The PHDO's lumped certificate counts as the PHSO's does (exit 1 unless allowed)."""
+    import bwdesign.codegen.export as export
+
+    real = export.certify_disturbance
+
+    def failing(*args, **kwargs):
+        return replace(real(*args, **kwargs), holds=False, status="not certified: forced")
+
+    monkeypatch.setattr(export, "certify_disturbance", failing)
+    with pytest.raises(NotCertifiedError, match="PHDO's lumped error is not certified"):
+        export_c(config, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    res = export_c(config, tmp_path / "out", allow_uncertified=True)
+    assert not res.certified and res.summary["tier"] == "sampled"
+    header = (tmp_path / "out" / "bw.h").read_text()
+    assert "PHDO lumped error NOT CERTIFIED (not certified: forced" in header
+    assert "PHSO/ESO gains CERTIFIED by the sampled tier" in header

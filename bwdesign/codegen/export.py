@@ -13,8 +13,9 @@
   and their float forms, the only ``<math.h>`` use), the exact ZOH step, the
   correction; no dynamic memory, no global mutable state, no I/O;
 - ``harness.c``: a ``main`` that reads ``u,z`` lines on stdin, runs one observer
-  step per line and prints the posterior with ``%.17g`` (and a controller mode),
-  so a user checks the code on their own toolchain;
+  step per line and prints the posterior with ``%.17g`` (and controller modes, and
+  ``phdo-loop``: the loop's sample with the controller fed by the PHDO), so a user
+  checks the code on their own toolchain;
 - ``export.json``: what was exported (gains, K, constants, certificate summary).
 
 ``cc -std=c99 DIR/*.c -lm`` builds the harness. Every constant is written as a
@@ -45,7 +46,7 @@ from string import Template
 from typing import Any
 
 from .._version import __version__
-from ..certify.disturbance import LumpedCertificate, certify_disturbance, synthesize_disturbance
+from ..certify.disturbance import LumpedCertificate, certify_disturbance
 from ..certify.results import CertificateReport
 from ..certify.synthesis import synthesize as synthesize_gains
 from ..certify.tiers import certify, certify_discrete
@@ -158,19 +159,25 @@ def _phdo_certified(params, gains, K, udot_max, dt, origin) -> _PhdoGains:
     return _PhdoGains(gains, K, cert, origin)
 
 
-def _phdo_gains(params, source, dt, udot_max, gains, K, tune, decay) -> _PhdoGains:
+def _phdo_gains(params, source, dt, udot_max, gains, K, tune) -> _PhdoGains:
     """The PHDO's gains for a gain source, certified by :func:`certify_disturbance`.
 
-    - ``config``: the config's ``[observer]`` gains in the lumped form ``(l1, l2, 0, l3)``
+    Every source gives the PHDO the lumped form of the 3-state gains it exports, so the
+    PHDO's observable part ``(x1, x2, x3 + d)`` has the exported PHSO's poles and the
+    whole lumped correction goes to ``d`` (``l3 = 0``):
+
+    - ``config``: the config's ``[observer]`` gains as ``(l1, l2, 0, l3)``
       (:func:`bwdesign.observers.gains.disturbance_gains_from`, as ``bwdesign sweep`` runs
       the PHDO from a stage file);
     - ``digital``: ``DigitalTuning.observer_gains_for("phdo")`` (the same form of the
       tuning's gains, as ``simulate --observer phdo --tuning digital``);
-    - ``synthesize``: the PHDO's own LMI synthesis
-      (:func:`bwdesign.certify.disturbance.synthesize_disturbance`, discrete ``K`` with
-      ``k3 = 0``) at the config's decay; when it gives no certified gains, the synthesised
-      PHSO gains in the lumped form (discrete ``(k1, k2, 0, k3)``, the same observable
-      poles as the exported PHSO), and ``origin`` says why.
+    - ``synthesize``: the synthesised PHSO gains in the same form (discrete
+      ``(k1, k2, 0, k3)`` when the synthesis returns discrete ``K``). The PHDO's own LMI
+      synthesis (:func:`bwdesign.certify.disturbance.synthesize_disturbance`) is not
+      used: it bounds the decay only, and on ``paper_experiment`` places a pole at
+      ``|z| = 1.8e-4`` (``k1 = 0.9998``: the measurement noise passes into the estimate
+      nearly unfiltered), and on ``stack_actuator_800hz`` its re-certification ends in
+      solver trouble (``optimal_inaccurate``).
     """
     if source == "digital":
         return _phdo_certified(
@@ -181,24 +188,7 @@ def _phdo_gains(params, source, dt, udot_max, gains, K, tune, decay) -> _PhdoGai
             dt,
             "the digital tuning's observer_gains_for('phdo') = (l1, l2, 0, l3)",
         )
-    if source == "config":
-        return _phdo_certified(
-            params,
-            disturbance_gains_from(gains),
-            None,
-            udot_max,
-            dt,
-            "the config's [observer] gains in the lumped form (l1, l2, 0, l3)",
-        )
-    K4, cert, why = synthesize_disturbance(params, udot_max=udot_max, dt=dt, decay=decay)
-    if K4 is not None and cert is not None:
-        return _PhdoGains(
-            None,
-            tuple(float(k) for k in K4),
-            cert,
-            f"synthesize_disturbance (the PHDO's LMI synthesis, k3 = 0) at decay {decay:g} 1/s",
-        )
-    fallback = f"the PHDO synthesis gave no certified gains ({why}); "
+    what = "the config's [observer] gains" if source == "config" else "the synthesised gains"
     if gains is not None:
         return _phdo_certified(
             params,
@@ -206,7 +196,7 @@ def _phdo_gains(params, source, dt, udot_max, gains, K, tune, decay) -> _PhdoGai
             None,
             udot_max,
             dt,
-            fallback + "the synthesised PHSO gains in the lumped form (l1, l2, 0, l3)",
+            f"{what} in the lumped form (l1, l2, 0, l3)",
         )
     k1, k2, k3 = K
     return _phdo_certified(
@@ -215,7 +205,7 @@ def _phdo_gains(params, source, dt, udot_max, gains, K, tune, decay) -> _PhdoGai
         (k1, k2, 0.0, k3),
         udot_max,
         dt,
-        fallback + "the synthesised PHSO gains K in the lumped form (k1, k2, 0, k3)",
+        f"{what} K in the lumped form (k1, k2, 0, k3)",
     )
 
 
@@ -226,7 +216,6 @@ def _gains(config, source, dt, udot_max):
     """
     params = config.plant
     ctl = config.controller
-    decay = (config.synthesis or {}).get("decay", 100.0)
     if source == "digital":
         tune = digital_tuning(params, dt)
         gains = tuple(float(g) for g in tune.gains)
@@ -238,12 +227,13 @@ def _gains(config, source, dt, udot_max):
             integral_rate=tune.integral_rate,
             u_limits=_limits(ctl),
         )
-        phdo = _phdo_gains(params, source, dt, udot_max, gains, None, tune, decay)
+        phdo = _phdo_gains(params, source, dt, udot_max, gains, None, tune)
         return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller, phdo
     controller = DiscreteTrackingController(
         params, ctl.lambda1, ctl.lambda2, dt=dt, u_limits=_limits(ctl)
     )
     if source == "synthesize":
+        decay = (config.synthesis or {}).get("decay", 100.0)
         syn = synthesize_gains(
             params,
             udot_max=udot_max,
@@ -255,14 +245,14 @@ def _gains(config, source, dt, udot_max):
             return None, None, syn.report, controller, None
         if syn.gains is not None:
             gains = tuple(syn.gains)
-            phdo = _phdo_gains(params, source, dt, udot_max, gains, None, None, decay)
+            phdo = _phdo_gains(params, source, dt, udot_max, gains, None, None)
             return gains, None, syn.report, controller, phdo
         K = tuple(syn.discrete_gains)
-        phdo = _phdo_gains(params, source, dt, udot_max, None, K, None, decay)
+        phdo = _phdo_gains(params, source, dt, udot_max, None, K, None)
         rep = certify_discrete(params, K, udot_max=udot_max, dt=dt)
         return None, K, rep, controller, phdo
     gains = tuple(config.gains)
-    phdo = _phdo_gains(params, source, dt, udot_max, gains, None, None, decay)
+    phdo = _phdo_gains(params, source, dt, udot_max, gains, None, None)
     return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller, phdo
 
 
@@ -578,6 +568,12 @@ def _zoh_step(ct: CTypes, zoh) -> dict[str, str]:
     (compensated with TwoSum), propagates increments (``F11 - 1`` and ``F22 - 1``
     round with a relative, not an absolute, error) and forms the innovation as
     ``(z - x[0]) - x1_lo``.
+
+    The propagate body reads the hysteresis input of the linear part as ``w``: ``x3``
+    for the 3-state observers, the lumped ``x3 + d`` for the PHDO. The PHDO's ``d``
+    integrates the innovation and so absorbs, as it is built to, the float32 rounding
+    of the constants: a static-gain error of ~1e-7 (about one ulp of x1), i.e. an
+    offset of ~1e-5 um in ``d`` that no float32 form of these constants avoids.
     """
     lit = ct.literal
     (f11, f12, f13), (f21, f22, f23) = zoh.F[:2].tolist()
@@ -689,16 +685,20 @@ def export_c(
         Output directory (written through the package's output layer).
     precision : {"float64", "float32"}
         Arithmetic of the generated code.
-    observer : {"phso", "eso"}
-        The observer the harness runs by default (the library carries all).
+    observer : {"phso", "eso", "phdo"}
+        The observer the harness runs by default (the library carries all three).
     prefix : str
         C identifier prefixed to every exported name.
     gains_from : {"config", "synthesize", "digital"}
         The config's [observer] gains; gains synthesised for the config's
         envelope (as ``bwdesign report`` does); or the digital tuning's gains
-        and controller (:func:`bwdesign.digital_tuning`).
+        and controller (:func:`bwdesign.digital_tuning`). The PHDO's gains follow from
+        each source as :func:`_phdo_gains` says (``export.json``'s
+        ``observers.phdo.gains_from`` records which).
     allow_uncertified : bool
-        Export gains that no certificate tier holds for (the header says so).
+        Export gains that no certificate holds for: no tier for the PHSO/ESO gains, or
+        no lumped-error certificate (:func:`bwdesign.certify_disturbance`) for the
+        PHDO's (the header says so).
     force : bool
         Write into a directory holding files bwdesign did not write (they are kept).
 
@@ -709,7 +709,8 @@ def export_c(
     Raises
     ------
     NotCertifiedError
-        No tier certifies the gains (and ``allow_uncertified`` is False).
+        No tier certifies the PHSO/ESO gains, or the PHDO's lumped error is not
+        certified (and ``allow_uncertified`` is False).
     ConfigError, InputError, UnboundedModelError
         Bad configuration or options; nothing is written.
     """
