@@ -157,9 +157,10 @@ def test_closed_loop_with_phdo_matches_python(builds, config, precision, tol):
     measurements z_k (phdo-loop) and must give the same inputs u_k and estimates. float64
     closes the loop on its own u_k (bit-identical, so the replay is the loop). float32
     predicts with the applied u_k as logged (the fifth column): a replay without the plant
-    has nothing that pulls the C loop's rounding differences back (the plant's response is
-    frozen in z), so on its own u_k it drifts from Python's run (measured: 0.19 of u's range
-    over 1e5 steps) without either being wrong.
+    has a neutral direction (a shift dw of the lumped estimate moves u by (a1/a3) dw through
+    the law, and that u makes the observer's model agree with the frozen z again), so on its
+    own u_k float32 rounding walks along it (measured: 0.19 of u's range over 1e5 steps); in
+    the real loop the plant answers u and pins it.
     """
     p, dt, c = config.plant, config.dt, config.controller
     ref_traj = Triangle(amplitude=60.0, offset=100.0, frequency=2.0)
