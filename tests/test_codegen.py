@@ -16,15 +16,19 @@ import pytest
 
 from bwdesign import (
     DiscreteTrackingController,
+    DisturbanceHysteresisObserver,
     ExtendedStateObserver,
     HysteresisObserver,
     TrackingController,
     load_config,
+    simulate,
     simulate_zoh,
 )
 from bwdesign.cli.main import main
 from bwdesign.codegen import c_literal, export_c
 from bwdesign.errors import NotCertifiedError
+from bwdesign.model.references import Triangle
+from bwdesign.observers.gains import disturbance_gains_from
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "paper_experiment.toml"
@@ -109,6 +113,77 @@ def test_observer_matches_python(builds, config, precision, tol, cls):
         err = np.max(np.abs(got - ref), axis=0) / scale
         assert got.shape == ref.shape
         assert np.all(err <= tol), f"{name}: relative error {err} > {tol}"
+
+
+@needs_cc
+@pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
+def test_phdo_matches_python(builds, config, precision, tol):
+    """The PHDO's four states against DisturbanceHysteresisObserver.batch_filter.
+
+    float64: each state within tol of its range (in fact 0.0, bit-identical). float32:
+    x1, x2, x3 and the lumped x3 + d (what is certified and fed to the controller) within
+    tol of their ranges; d within tol of the lumped state's range. On exact-model data d
+    only follows the noise (range ~0.05 um) and absorbs, as it is built to, the float32
+    rounding of the model constants (a static-gain error of ~1e-7, i.e. ~1 ulp of x1):
+    its error is ~2e-5 um, 3e-4 to 5e-4 of its own range (the bench prints it).
+    """
+    p, dt = config.plant, config.dt
+    rng = np.random.default_rng(7)
+    gains = disturbance_gains_from(config.gains)
+    for name, u in _inputs(dt, rng).items():
+        X = simulate_zoh(p, u, dt, x0=np.zeros(3))
+        z = X[1:, 0] + rng.normal(0, 0.01, N)
+        ref = DisturbanceHysteresisObserver(p, gains, dt).batch_filter(z, u)
+        got = _run(builds[precision], "phdo", np.column_stack([u, z]))
+        assert got.shape == ref.shape == (N, 4)
+        err = np.max(np.abs(got - ref), axis=0)
+        lumped_ref, lumped = ref[:, 2] + ref[:, 3], got[:, 2] + got[:, 3]
+        lumped_err = np.max(np.abs(lumped - lumped_ref)) / np.ptp(lumped_ref)
+        rel = err[:3] / np.ptp(ref[:, :3], axis=0)
+        assert np.all(rel <= tol), f"{name}: relative error of x1, x2, x3 {rel} > {tol}"
+        assert lumped_err <= tol, f"{name}: lumped x3 + d error {lumped_err:.3g} > {tol}"
+        assert err[3] <= tol * np.ptp(lumped_ref), f"{name}: d error {err[3]:.3g} um"
+        if precision == "float64":
+            assert err[3] <= tol * np.ptp(ref[:, 3]), f"{name}: d error {err[3]:.3g} um"
+
+
+@needs_cc
+@pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
+def test_closed_loop_with_phdo_matches_python(builds, config, precision, tol):
+    """The controller fed by the PHDO's lumped estimate, as bwdesign.simulate runs the loop.
+
+    The Python loop (generic path: the objects themselves) runs a plant with a1 +2 % and
+    a3 -2 % (the PHDO's case: d has work to do) and 10 nm noise; the harness replays its
+    measurements z_k (phdo-loop) and must give the same inputs u_k and estimates. float64
+    closes the loop on its own u_k (bit-identical, so the replay is the loop). float32
+    predicts with the applied u_k as logged (the fifth column): a replay without the plant
+    has a neutral direction (a shift dw of the lumped estimate moves u by (a1/a3) dw through
+    the law, and that u makes the observer's model agree with the frozen z again), so on its
+    own u_k float32 rounding walks along it (measured: 0.19 of u's range over 1e5 steps); in
+    the real loop the plant answers u and pins it.
+    """
+    p, dt, c = config.plant, config.dt, config.controller
+    ref_traj = Triangle(amplitude=60.0, offset=100.0, frequency=2.0)
+    res = simulate(
+        p,
+        ref_traj,
+        dt=dt,
+        duration=N * dt,
+        observer="phdo",
+        gains=disturbance_gains_from(config.gains),
+        controller=DiscreteTrackingController(p, c.lambda1, c.lambda2, dt=dt),
+        true_params=replace(p, a1=1.02 * p.a1, a3=0.98 * p.a3),
+        noise_std=0.01,
+        seed=5,
+        fast=False,
+    )
+    assert res.stable and res.u.shape == (N,)
+    xd, vd, ad = (np.asarray(a) for a in ref_traj.evaluate(res.t))
+    cols = [res.z, xd, vd, ad] + ([res.u] if precision == "float32" else [])
+    got = _run(builds[precision], "phdo-loop", np.column_stack(cols))
+    want = np.column_stack([res.u, res.xhat])
+    err = np.max(np.abs(got - want), axis=0) / np.ptp(want, axis=0)
+    assert np.all(err <= tol), f"u, x1, x2, x3 + d: relative error {err} > {tol}"
 
 
 @needs_cc
@@ -332,6 +407,7 @@ def test_cli_json(tmp_path, capsys):
 @pytest.mark.parametrize("precision", ["float32", "float64"])
 def test_cross_compiles_for_cortex_m4f(tmp_path, config, precision):
     export_c(config, tmp_path, precision=precision)
+    assert "bw_phdo_step" in (tmp_path / "bw.c").read_text()
     obj = tmp_path / "bw.o"
     flags = ["-mcpu=cortex-m4", "-mfpu=fpv4-sp-d16", "-mfloat-abi=hard", "-mthumb"]
     subprocess.run(
@@ -341,3 +417,102 @@ def test_cross_compiles_for_cortex_m4f(tmp_path, config, precision):
     )
     size = subprocess.run(["arm-none-eabi-size", str(obj)], capture_output=True, text=True)
     assert size.returncode == 0 and "text" in size.stdout
+
+
+class _PhdoObserver(ctypes.Structure):
+    _fields_ = [
+        ("x", ctypes.c_double * 4),
+        ("x_prior", ctypes.c_double * 4),
+        ("x1_lo", ctypes.c_double),
+        ("u_prev", ctypes.c_double),
+        ("guard_trips", ctypes.c_ulong),
+        ("uncovered", ctypes.c_int),
+    ]
+
+
+@needs_cc
+def test_phdo_guard_and_lumped_estimate(tmp_path, config):
+    """bw_phdo_*: the runtime guard as the PHSO's, and bw_phdo_lumped = (x1, x2, x3 + d)."""
+    res = export_c(config, tmp_path)
+    lib = _shared_library(tmp_path)
+    du_max = res.summary["udot_max"] * config.dt
+    s = _PhdoObserver()
+    lib.bw_phdo_init(ctypes.byref(s))
+    lib.bw_phdo_step.argtypes = [ctypes.POINTER(_PhdoObserver), ctypes.c_double, ctypes.c_double]
+    lib.bw_phdo_step(ctypes.byref(s), 0.9 * du_max, 0.0)
+    assert (s.uncovered, s.guard_trips) == (0, 0)
+    lib.bw_phdo_step(ctypes.byref(s), 0.9 * du_max + 1.01 * du_max, 0.5)
+    assert (s.uncovered, s.guard_trips) == (1, 1)
+    py = DisturbanceHysteresisObserver(
+        config.plant, disturbance_gains_from(config.gains), config.dt
+    )
+    py.predict(0.9 * du_max)
+    py.update(0.0)
+    py.predict(0.9 * du_max + 1.01 * du_max)
+    py.update(0.5)
+    assert list(s.x) == py.x.tolist() and py.x[3] != 0.0
+    xhat = (ctypes.c_double * 3)()
+    lib.bw_phdo_lumped(ctypes.byref(s), xhat)
+    assert list(xhat) == py.x_lumped.tolist()
+    header = (tmp_path / "bw.h").read_text()
+    assert "PHDO lumped error CERTIFIED by the sampled tier" in header
+    assert "void bw_phdo_lumped(const bw_phdo_observer *s, bw_real xhat[3]);" in header
+
+
+@needs_cc
+def test_harness_default_observer_phdo(tmp_path, capsys, config):
+    """export-c --observer phdo: the harness runs the PHDO without a mode argument."""
+    code = main(["export-c", "--config", str(CONFIG), "--out", str(tmp_path), "--observer", "phdo"])
+    assert code == 0 and "PHDO lumped error by the sampled tier" in capsys.readouterr().out
+    exe = _build(tmp_path)
+    u = 70 + 40 * np.sin(2 * np.pi * np.arange(2000) * config.dt)
+    z = 1.39 * u - 1.0
+    text = "\n".join(f"{a!r},{b!r}" for a, b in zip(u.tolist(), z.tolist(), strict=True))
+    out = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True)
+    got = np.loadtxt(out.stdout.splitlines(), delimiter=",")
+    gains = disturbance_gains_from(config.gains)
+    ref = DisturbanceHysteresisObserver(config.plant, gains, config.dt).batch_filter(z, u)
+    assert got.shape == (2000, 4) and np.array_equal(got, ref)
+    doc = json.loads((tmp_path / "export.json").read_text())
+    assert doc["harness_observer"] == "phdo"
+    assert doc["observers"]["phdo"]["gains"] == list(gains)
+    assert doc["observers"]["phdo"]["certificate"]["holds"]
+    assert doc["certificate"]["phdo"]["certified"] and doc["certificate"]["certified"]
+
+
+def test_phdo_gains_per_source(tmp_path, config):
+    """--tuning digital: observer_gains_for("phdo"); --synthesize: the synthesised K lumped."""
+    from bwdesign import digital_tuning
+
+    res = export_c(config, tmp_path / "digital", gains_from="digital")
+    g = digital_tuning(config.plant, config.dt).observer_gains_for("phdo")
+    phdo = res.document["observers"]["phdo"]
+    assert phdo["gains"] == list(g) and "observer_gains_for('phdo')" in phdo["gains_from"]
+    assert phdo["K"] == DisturbanceHysteresisObserver(config.plant, g, config.dt).K.tolist()
+    res = export_c(config, tmp_path / "syn", gains_from="synthesize")
+    k1, k2, k3 = res.document["observers"]["phso"]["K"]
+    phdo = res.document["observers"]["phdo"]
+    assert phdo["K"] == [k1, k2, 0.0, k3]  # the exported PHSO's observable poles
+    assert phdo["gains"] == list(disturbance_gains_from(res.document["gains"]))
+    assert "synthesised gains in the lumped form" in phdo["gains_from"]
+    assert phdo["certificate"]["holds"] and res.certified
+
+
+def test_uncertified_phdo_is_refused(tmp_path, config, monkeypatch):
+    """The PHDO's lumped certificate counts as the PHSO's does (exit 1 unless allowed)."""
+    import bwdesign.codegen.export as export
+
+    real = export.certify_disturbance
+
+    def failing(*args, **kwargs):
+        return replace(real(*args, **kwargs), holds=False, status="not certified: forced")
+
+    monkeypatch.setattr(export, "certify_disturbance", failing)
+    with pytest.raises(NotCertifiedError, match="PHDO's lumped error is not certified"):
+        export_c(config, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    res = export_c(config, tmp_path / "out", allow_uncertified=True)
+    assert not res.certified and res.summary["tier"] == "sampled"
+    header = (tmp_path / "out" / "bw.h").read_text()
+    assert "PHDO lumped error NOT CERTIFIED (not certified: forced" in header
+    assert "PHSO/ESO gains CERTIFIED by the sampled tier" in header

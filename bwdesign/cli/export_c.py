@@ -26,7 +26,8 @@ def export_c_args(p: argparse.ArgumentParser) -> None:
         "--observer",
         choices=tuple(OBSERVERS),
         default="phso",
-        help="the observer the harness runs (the library carries all); default phso",
+        help="the observer the harness runs by default (the library carries all three: phso, "
+        "eso and phdo, the disturbance hysteresis observer); default phso",
     )
     p.add_argument("--prefix", default="bw", metavar="NAME", help="C name prefix (default bw)")
     src = p.add_mutually_exclusive_group()
@@ -71,11 +72,18 @@ def run_export_c(args: argparse.Namespace) -> int:
     if args.json:
         print(dump_json({"out_dir": str(res.out_dir), "files": list(res.files), **res.document}))
         return EXIT_OK
-    s = res.summary
+    s, d = res.summary, res.summary["phdo"]
     status = (
-        f"certified by the {s['tier']} tier for |u'| <= {s['udot_max']:.6g} V/s"
-        if res.certified
-        else "NOT CERTIFIED (exported with --allow-uncertified)"
+        f"PHSO/ESO gains certified by the {s['tier']} tier"
+        if s["tier"] is not None
+        else "PHSO/ESO gains NOT CERTIFIED"
+    ) + (
+        f", PHDO lumped error by the {d['tier']} tier of certify_disturbance"
+        if d["certified"]
+        else ", PHDO lumped error NOT CERTIFIED"
+    )
+    status += f" for |u'| <= {s['udot_max']:.6g} V/s" + (
+        "" if res.certified else " (exported with --allow-uncertified)"
     )
     print(f"{res.out_dir}: {', '.join(res.files)} ({args.precision}); {status}")
     print(f"  build and check: cc -std=c99 -O2 {res.out_dir}/*.c -lm -o harness")

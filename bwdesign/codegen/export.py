@@ -3,15 +3,19 @@
 :func:`export_c` turns a stage configuration into a directory holding
 
 - ``PREFIX.h``: the state structs, ``init``/``reset``/``predict``/``update``/``step``
-  of every sampled observer the package has (PHSO, ESO) and the controller's
-  ``compute``; compile-time constants for ``dt`` and the certified ``|u'|`` bound;
-  a comment block with the certificate summary;
+  of every sampled observer the package has (PHSO, ESO, and the disturbance
+  observer PHDO with its four states and ``PREFIX_phdo_lumped``, the estimate
+  ``(x1, x2, x3 + d)`` the controller is fed) and the controller's ``compute``;
+  compile-time constants for ``dt`` and the certified ``|u'|`` bound; a comment
+  block with the certificate summary (the PHSO's tier and the PHDO's lumped-error
+  certificate);
 - ``PREFIX.c``: the implementation: the exact hysteresis jump (``expm1``/``log1p``
   and their float forms, the only ``<math.h>`` use), the exact ZOH step, the
   correction; no dynamic memory, no global mutable state, no I/O;
 - ``harness.c``: a ``main`` that reads ``u,z`` lines on stdin, runs one observer
-  step per line and prints the posterior with ``%.17g`` (and a controller mode),
-  so a user checks the code on their own toolchain;
+  step per line and prints the posterior with ``%.17g`` (and controller modes, and
+  ``phdo-loop``: the loop's sample with the controller fed by the PHDO), so a user
+  checks the code on their own toolchain;
 - ``export.json``: what was exported (gains, K, constants, certificate summary).
 
 ``cc -std=c99 DIR/*.c -lm`` builds the harness. Every constant is written as a
@@ -21,7 +25,8 @@ the ``f`` math functions, so nothing is promoted to double.
 
 The C step performs the Python classes' float operations in the same order
 (``bwdesign.observers``: :class:`~bwdesign.HysteresisObserver`,
-:class:`~bwdesign.ExtendedStateObserver`; ``bwdesign.control``:
+:class:`~bwdesign.ExtendedStateObserver`, :class:`~bwdesign.DisturbanceHysteresisObserver`;
+``bwdesign.control``:
 :class:`~bwdesign.DiscreteTrackingController`, :class:`~bwdesign.TrackingController`),
 so float64 agrees with Python to rounding.
 
@@ -41,6 +46,7 @@ from string import Template
 from typing import Any
 
 from .._version import __version__
+from ..certify.disturbance import LumpedCertificate, certify_disturbance
 from ..certify.results import CertificateReport
 from ..certify.synthesis import synthesize as synthesize_gains
 from ..certify.tiers import certify, certify_discrete
@@ -51,7 +57,12 @@ from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.plant import discretize
 from ..observers.base import _SampledObserver
-from ..observers.sampled import ExtendedStateObserver, HysteresisObserver
+from ..observers.gains import disturbance_gains_from
+from ..observers.sampled import (
+    DisturbanceHysteresisObserver,
+    ExtendedStateObserver,
+    HysteresisObserver,
+)
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from .literals import CTypes
@@ -62,7 +73,13 @@ __all__ = ["OBSERVERS", "CExport", "export_c", "c_sources"]
 OBSERVERS: dict[str, tuple[type[_SampledObserver], str]] = {
     "phso": (HysteresisObserver, "hysteresis observer (PHSO, paper eq. 3)"),
     "eso": (ExtendedStateObserver, "extended state observer (ESO, paper eq. 21)"),
+    "phdo": (
+        DisturbanceHysteresisObserver,
+        "disturbance hysteresis observer (PHDO: the PHSO with an integrating disturbance d)",
+    ),
 }
+#: The observers with three states (``PREFIX_observer``); the PHDO has its own struct.
+_THREE_STATE = ("phso", "eso")
 GAIN_SOURCES = ("config", "synthesize", "digital")
 _PREFIX = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,30}")
 
@@ -123,8 +140,80 @@ def _requirements(config: StageConfig, source: str) -> tuple[float, float]:
     return float(config.dt), config.envelope().udot_max
 
 
+@dataclass(frozen=True)
+class _PhdoGains:
+    """The PHDO's gains (continuous ``gains`` or discrete ``K``), its certificate, their origin."""
+
+    gains: tuple[float, ...] | None
+    K: tuple[float, ...] | None
+    certificate: LumpedCertificate
+    origin: str
+
+
+def _phdo_certified(params, gains, K, udot_max, dt, origin) -> _PhdoGains:
+    cert = (
+        certify_disturbance(params, gains, udot_max=udot_max, dt=dt)
+        if K is None
+        else certify_disturbance(params, udot_max=udot_max, dt=dt, discrete=K)
+    )
+    return _PhdoGains(gains, K, cert, origin)
+
+
+def _phdo_gains(params, source, dt, udot_max, gains, K, tune) -> _PhdoGains:
+    """The PHDO's gains for a gain source, certified by :func:`certify_disturbance`.
+
+    Every source gives the PHDO the lumped form of the 3-state gains it exports, so the
+    PHDO's observable part ``(x1, x2, x3 + d)`` has the exported PHSO's poles and the
+    whole lumped correction goes to ``d`` (``l3 = 0``):
+
+    - ``config``: the config's ``[observer]`` gains as ``(l1, l2, 0, l3)``
+      (:func:`bwdesign.observers.gains.disturbance_gains_from`, as ``bwdesign sweep`` runs
+      the PHDO from a stage file);
+    - ``digital``: ``DigitalTuning.observer_gains_for("phdo")`` (the same form of the
+      tuning's gains, as ``simulate --observer phdo --tuning digital``);
+    - ``synthesize``: the synthesised PHSO gains in the same form (discrete
+      ``(k1, k2, 0, k3)`` when the synthesis returns discrete ``K``). The PHDO's own LMI
+      synthesis (:func:`bwdesign.certify.disturbance.synthesize_disturbance`) is not
+      used: it bounds the decay only, and on ``paper_experiment`` places a pole at
+      ``|z| = 1.8e-4`` (``k1 = 0.9998``: the measurement noise passes into the estimate
+      nearly unfiltered), and on ``stack_actuator_800hz`` its re-certification ends in
+      solver trouble (``optimal_inaccurate``).
+    """
+    if source == "digital":
+        return _phdo_certified(
+            params,
+            tune.observer_gains_for("phdo"),
+            None,
+            udot_max,
+            dt,
+            "the digital tuning's observer_gains_for('phdo') = (l1, l2, 0, l3)",
+        )
+    what = "the config's [observer] gains" if source == "config" else "the synthesised gains"
+    if gains is not None:
+        return _phdo_certified(
+            params,
+            disturbance_gains_from(gains),
+            None,
+            udot_max,
+            dt,
+            f"{what} in the lumped form (l1, l2, 0, l3)",
+        )
+    k1, k2, k3 = K
+    return _phdo_certified(
+        params,
+        None,
+        (k1, k2, 0.0, k3),
+        udot_max,
+        dt,
+        f"{what} K in the lumped form (k1, k2, 0, k3)",
+    )
+
+
 def _gains(config, source, dt, udot_max):
-    """(continuous gains or None, discrete K or None, certificate report, controller)."""
+    """(continuous gains or None, discrete K or None, certificate report, controller, PHDO).
+
+    The PHDO entry is None when there are no gains to export (synthesis infeasible).
+    """
     params = config.plant
     ctl = config.controller
     if source == "digital":
@@ -138,7 +227,8 @@ def _gains(config, source, dt, udot_max):
             integral_rate=tune.integral_rate,
             u_limits=_limits(ctl),
         )
-        return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller
+        phdo = _phdo_gains(params, source, dt, udot_max, gains, None, tune)
+        return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller, phdo
     controller = DiscreteTrackingController(
         params, ctl.lambda1, ctl.lambda2, dt=dt, u_limits=_limits(ctl)
     )
@@ -152,13 +242,18 @@ def _gains(config, source, dt, udot_max):
             dt=dt,
         )
         if not syn.feasible:
-            return None, None, syn.report, controller
+            return None, None, syn.report, controller, None
         if syn.gains is not None:
-            return tuple(syn.gains), None, syn.report, controller
+            gains = tuple(syn.gains)
+            phdo = _phdo_gains(params, source, dt, udot_max, gains, None, None)
+            return gains, None, syn.report, controller, phdo
         K = tuple(syn.discrete_gains)
-        return None, K, certify_discrete(params, K, udot_max=udot_max, dt=dt), controller
+        phdo = _phdo_gains(params, source, dt, udot_max, None, K, None)
+        rep = certify_discrete(params, K, udot_max=udot_max, dt=dt)
+        return None, K, rep, controller, phdo
     gains = tuple(config.gains)
-    return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller
+    phdo = _phdo_gains(params, source, dt, udot_max, gains, None, None)
+    return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller, phdo
 
 
 def _limits(ctl) -> tuple[float, float] | None:
@@ -169,11 +264,20 @@ def _limits(ctl) -> tuple[float, float] | None:
     return (lo, hi)
 
 
-def _summary(config, rep: CertificateReport | None, udot_max, dt, source) -> dict[str, Any]:
+def _summary(
+    config, rep: CertificateReport | None, udot_max, dt, source, phdo: _PhdoGains | None
+) -> dict[str, Any]:
+    """The certificate summary: ``certified`` when every exported observer's gains are.
+
+    ``tier`` .. ``decay_rate`` are the certificate of the 3-state gains (the PHSO's
+    error, :func:`bwdesign.certify`; the ESO runs the same gains); ``phdo`` is the
+    PHDO's lumped-error certificate (:func:`bwdesign.certify_disturbance`).
+    """
     best = None if rep is None else rep.best
     tier = None if best is None else rep.tier(best)
+    cert = None if phdo is None else phdo.certificate
     return {
-        "certified": best is not None,
+        "certified": best is not None and cert is not None and cert.holds,
         "tier": best,
         "udot_max": udot_max,
         "max_udot": None if tier is None else tier.max_udot,
@@ -182,10 +286,24 @@ def _summary(config, rep: CertificateReport | None, udot_max, dt, source) -> dic
         "gains_from": source,
         "config": Path(config.source).name if config.source else "",
         "config_sha256": config.sha256,
+        "phdo": None
+        if phdo is None
+        else {
+            "certified": cert.holds,
+            "tier": cert.tier,
+            "udot_max": cert.udot_max,
+            "dt": dt,
+            "claim": cert.claim,
+            "status": cert.status,
+            "split": cert.split,
+            "gains_from": phdo.origin,
+        },
     }
 
 
-def _comment(summary: dict[str, Any], gains, K: dict[str, list[float]], params) -> str:
+def _comment(
+    summary: dict[str, Any], gains, K: dict[str, list[float]], params, phdo: _PhdoGains
+) -> str:
     def num(v):
         return "-" if v is None else f"{v:.10g}"
 
@@ -204,17 +322,36 @@ def _comment(summary: dict[str, Any], gains, K: dict[str, list[float]], params) 
     lines += [
         f"  {name}: K = (" + ", ".join(f"{k:.17g}" for k in ks) + ")" for name, ks in K.items()
     ]
-    if summary["certified"]:
+    if summary["tier"] is not None:
         lines += [
-            f"CERTIFIED by the {summary['tier']} tier for |u'| <= {num(summary['udot_max'])} V/s "
-            f"at dt = {num(summary['dt'])} s ({reach}), certified decay "
-            f"{num(summary['decay_rate'])} 1/s.",
+            f"PHSO/ESO gains CERTIFIED by the {summary['tier']} tier for |u'| <= "
+            f"{num(summary['udot_max'])} V/s at dt = {num(summary['dt'])} s ({reach}), "
+            f"certified decay {num(summary['decay_rate'])} 1/s.",
         ]
     else:
         lines += [
-            f"NOT CERTIFIED: no tier holds for |u'| <= {num(summary['udot_max'])} V/s at "
-            f"dt = {num(summary['dt'])} s (exported with --allow-uncertified).",
+            f"PHSO/ESO gains NOT CERTIFIED: no tier holds for |u'| <= "
+            f"{num(summary['udot_max'])} V/s at dt = {num(summary['dt'])} s "
+            "(exported with --allow-uncertified).",
         ]
+    cert = phdo.certificate
+    lines += [
+        f"PHDO gains from {phdo.origin}: "
+        + (
+            "continuous l = (" + ", ".join(f"{g:.17g}" for g in phdo.gains) + ")"
+            if phdo.gains is not None
+            else "discrete K (below)"
+        ),
+        (
+            f"PHDO lumped error CERTIFIED by the {cert.tier} tier of certify_disturbance"
+            if cert.holds
+            else f"PHDO lumped error NOT CERTIFIED ({cert.status}; exported with "
+            "--allow-uncertified)"
+        )
+        + f" for |u'| <= {num(cert.udot_max)} V/s at dt = {num(summary['dt'])} s: the claim is",
+        "  that (x1, x2, x3 + d) converges to 0 and x3, d stay bounded; x3 and d converge",
+        "  separately only while the input moves. The controller is fed (x1, x2, x3 + d).",
+    ]
     return "\n".join(" * " + line for line in lines)
 
 
@@ -248,17 +385,24 @@ def c_sources(
     params = config.plant
     require_bounded(params, allow_unbounded)
     dt, udot_max = _requirements(config, gains_from)
-    gains, K, rep, controller = _gains(config, gains_from, dt, udot_max)
-    summary = _summary(config, rep, udot_max, dt, gains_from)
+    gains, K, rep, controller, phdo = _gains(config, gains_from, dt, udot_max)
+    summary = _summary(config, rep, udot_max, dt, gains_from, phdo)
     if not summary["certified"] and not allow_uncertified:
-        why = (
-            "synthesis found no certified gains"
-            if gains is None and K is None
-            else (
-                f"no certificate tier holds for these gains at |u'| <= {udot_max:.6g} V/s, "
-                f"dt = {dt:g} s"
-            )
-        )
+        if gains is None and K is None:
+            why = "synthesis found no certified gains"
+        else:
+            whys = []
+            if summary["tier"] is None:
+                whys.append(
+                    f"no certificate tier holds for these gains at |u'| <= {udot_max:.6g} V/s, "
+                    f"dt = {dt:g} s"
+                )
+            if not phdo.certificate.holds:
+                whys.append(
+                    f"the PHDO's lumped error is not certified for its gains ({phdo.origin}) "
+                    f"at |u'| <= {udot_max:.6g} V/s, dt = {dt:g} s: {phdo.certificate.status}"
+                )
+            why = "; ".join(whys)
         raise NotCertifiedError(f"{why}; nothing exported (--allow-uncertified exports anyway)")
     if gains is None and K is None:
         raise NotCertifiedError("synthesis found no gains to export")
@@ -276,12 +420,21 @@ def c_sources(
         if K is None
         else cls(params, dt=dt, discrete=K, allow_unbounded=allow_unbounded)
         for name, (cls, _) in OBSERVERS.items()
+        if name in _THREE_STATE
     }
+    observers["phdo"] = (
+        DisturbanceHysteresisObserver(params, phdo.gains, dt, allow_unbounded=allow_unbounded)
+        if phdo.K is None
+        else DisturbanceHysteresisObserver(
+            params, dt=dt, discrete=phdo.K, allow_unbounded=allow_unbounded
+        )
+    )
     Ks = {name: [float(k) for k in obs.K] for name, obs in observers.items()}
     zoh = discretize(params, dt)
     (f11, f12, f13), (f21, f22, f23) = zoh.F[0], zoh.F[1]
     proto, impl = [], []
-    for name, (cls, title) in OBSERVERS.items():
+    for name in _THREE_STATE:
+        cls, title = OBSERVERS[name]
         k1, k2, k3 = Ks[name]
         vals = dict(base, obs=name, OBS=name.upper(), title=title)
         proto.append(_fill("observer.h.tmpl", **vals))
@@ -289,6 +442,17 @@ def c_sources(
         impl.append(
             _fill("observer.c.tmpl", **vals, k1=lit(k1), k2=lit(k2), k3=lit(k3), x3_next=x3_next)
         )
+    zoh_step = _zoh_step(ct, zoh)
+    impl.append(
+        _fill(
+            "phdo.c.tmpl",
+            **base,
+            title=OBSERVERS["phdo"][1],
+            **{f"k{i + 1}": lit(k) for i, k in enumerate(Ks["phdo"])},
+            propagate_body=zoh_step["propagate_body"],
+            correct_body=zoh_step["correct_body"],
+        )
+    )
     ctl = config.controller
     l1, l2 = (
         (ctl.lambda1, ctl.lambda2) if ctl is not None else (controller.lambda1, controller.lambda2)
@@ -312,7 +476,7 @@ def c_sources(
         + (f", integral rate {controller.integral_rate:g}" if controller.integral_rate else "")
         + (", digital tuning" if gains_from == "digital" else "")
     )
-    comment = _comment(summary, gains, Ks, params)
+    comment = _comment(summary, gains, Ks, params, phdo)
     header_vals = dict(
         base,
         guard=f"{prefix.upper()}_H",
@@ -331,7 +495,7 @@ def c_sources(
         base,
         stage=params.name or "(unnamed)",
         sha256=config.sha256 or "-",
-        **_zoh_step(ct, zoh),
+        **zoh_step,
         alpha=lit(params.alpha),
         beta=lit(params.beta),
         gamma=lit(params.gamma),
@@ -351,7 +515,7 @@ def c_sources(
         input_unit=params.input_unit,
         observers="".join(impl),
     )
-    init_dispatch, step_dispatch = _harness_dispatch(prefix, list(OBSERVERS))
+    init_dispatch, step_dispatch = _harness_dispatch(prefix, list(_THREE_STATE))
     harness = _fill(
         "harness.c.tmpl",
         **base,
@@ -366,7 +530,16 @@ def c_sources(
         "harness_observer": observer,
         "certificate": summary,
         "gains": None if gains is None else list(gains),
-        "observers": {name: {"K": Ks[name]} for name in OBSERVERS},
+        "observers": {
+            **{name: {"K": Ks[name]} for name in _THREE_STATE},
+            "phdo": {
+                "K": Ks["phdo"],
+                "gains": None if phdo.gains is None else list(phdo.gains),
+                "gains_from": phdo.origin,
+                "controller_input": "lumped (x1, x2, x3 + d): PREFIX_phdo_lumped",
+                "certificate": phdo.certificate.to_dict(),
+            },
+        },
         "controller": controller.to_dict(),
         "eq12": {"lambda1": l1, "lambda2": l2},
         "model": {
@@ -395,6 +568,12 @@ def _zoh_step(ct: CTypes, zoh) -> dict[str, str]:
     (compensated with TwoSum), propagates increments (``F11 - 1`` and ``F22 - 1``
     round with a relative, not an absolute, error) and forms the innovation as
     ``(z - x[0]) - x1_lo``.
+
+    The propagate body reads the hysteresis input of the linear part as ``w``: ``x3``
+    for the 3-state observers, the lumped ``x3 + d`` for the PHDO. The PHDO's ``d``
+    integrates the innovation and so absorbs, as it is built to, the float32 rounding
+    of the constants: a static-gain error of ~1e-7 (about one ulp of x1), i.e. an
+    offset of ~1e-5 um in ``d`` that no float32 form of these constants avoids.
     """
     lit = ct.literal
     (f11, f12, f13), (f21, f22, f23) = zoh.F[:2].tolist()
@@ -411,8 +590,8 @@ def _zoh_step(ct: CTypes, zoh) -> dict[str, str]:
             "compensation": "",
             "propagate_body": (
                 "    const double x1 = s->x[0], x2 = s->x[1];\n"
-                "    s->x[0] = F11 * x1 + F12 * x2 + F13 * x3 + G1 * u;\n"
-                "    s->x[1] = F21 * x1 + F22 * x2 + F23 * x3 + G2 * u;\n"
+                "    s->x[0] = F11 * x1 + F12 * x2 + F13 * w + G1 * u;\n"
+                "    s->x[1] = F21 * x1 + F22 * x2 + F23 * w + G2 * u;\n"
             ),
             "correct_body": (
                 "    const double r = z - s->x[0];\n"
@@ -440,8 +619,8 @@ def _zoh_step(ct: CTypes, zoh) -> dict[str, str]:
         ),
         "propagate_body": (
             "    const float x1 = s->x[0], lo = s->x1_lo, x2 = s->x[1];\n"
-            "    const float d1 = D11 * x1 + F12 * x2 + F13 * x3 + G1 * u + D11 * lo;\n"
-            "    s->x[1] = x2 + (F21 * x1 + D22 * x2 + F23 * x3 + G2 * u + F21 * lo);\n"
+            "    const float d1 = D11 * x1 + F12 * x2 + F13 * w + G1 * u + D11 * lo;\n"
+            "    s->x[1] = x2 + (F21 * x1 + D22 * x2 + F23 * w + G2 * u + F21 * lo);\n"
             "    two_sum(x1, lo + d1, &s->x[0], &s->x1_lo);\n"
         ),
         "correct_body": (
@@ -454,6 +633,8 @@ def _zoh_step(ct: CTypes, zoh) -> dict[str, str]:
 
 
 def _harness_dispatch(prefix: str, names: list[str]) -> tuple[str, str]:
+    """The 3-state observers' init and step in the harness (the PHDO has its own loops)."""
+    modes = [*names, "phdo", "phdo-loop", "controller", "eq12"]
     init = []
     step = [
         "        {",
@@ -473,7 +654,7 @@ def _harness_dispatch(prefix: str, names: list[str]) -> tuple[str, str]:
         ]
     init += [
         "    } else {",
-        f'        fprintf(stderr, "harness: unknown observer %s ({", ".join(names)})\\n", name);',
+        f'        fprintf(stderr, "harness: unknown mode %s ({", ".join(modes)})\\n", name);',
         "        return 2;",
         "    }",
     ]
@@ -504,16 +685,20 @@ def export_c(
         Output directory (written through the package's output layer).
     precision : {"float64", "float32"}
         Arithmetic of the generated code.
-    observer : {"phso", "eso"}
-        The observer the harness runs by default (the library carries all).
+    observer : {"phso", "eso", "phdo"}
+        The observer the harness runs by default (the library carries all three).
     prefix : str
         C identifier prefixed to every exported name.
     gains_from : {"config", "synthesize", "digital"}
         The config's [observer] gains; gains synthesised for the config's
         envelope (as ``bwdesign report`` does); or the digital tuning's gains
-        and controller (:func:`bwdesign.digital_tuning`).
+        and controller (:func:`bwdesign.digital_tuning`). The PHDO's gains follow from
+        each source as :func:`_phdo_gains` says (``export.json``'s
+        ``observers.phdo.gains_from`` records which).
     allow_uncertified : bool
-        Export gains that no certificate tier holds for (the header says so).
+        Export gains that no certificate holds for: no tier for the PHSO/ESO gains, or
+        no lumped-error certificate (:func:`bwdesign.certify_disturbance`) for the
+        PHDO's (the header says so).
     force : bool
         Write into a directory holding files bwdesign did not write (they are kept).
 
@@ -524,7 +709,8 @@ def export_c(
     Raises
     ------
     NotCertifiedError
-        No tier certifies the gains (and ``allow_uncertified`` is False).
+        No tier certifies the PHSO/ESO gains, or the PHDO's lumped error is not
+        certified (and ``allow_uncertified`` is False).
     ConfigError, InputError, UnboundedModelError
         Bad configuration or options; nothing is written.
     """
