@@ -153,24 +153,16 @@ def test_report_has_the_robust_section(tmp_path):
     from bwdesign import load_config, simulate
     from bwdesign.control.tuning import digital_tuning
     from bwdesign.report.certified import build_report
+    from bwdesign.sim.start import start_on_reference
 
     config = load_config("stack_actuator_800hz")
     doc, cert, _, _ = build_report(config, tmp_path, quiet=True)
     md = doc.to_markdown()
-    rob = cert["robust"]
-    c = rob["certificate"]
-    assert c["holds"]
-    assert c["n_vertices"] == 64
-    est = rob["simulated_worst_estimation_maxe"]
-    assert c["tracking_bound"] >= rob["simulated_worst_maxe"] > 0
-    assert c["estimation_bound"] >= est[0] > 0
-    assert c["x3_estimation_bound"] >= est[2] > 0
-    assert rob["conservatism"] >= 1
-    assert "RMS" not in md.split("## Robust certificate")[1].split("##")[0]
-    # recompute the simulated column: the batch at every corner, then the scalar
-    # simulate() at the worst corners, whose full records give the max |error| directly
+    section = md.split("## Robust certificate")[1].split("\n## ")[0]
+    assert "RMS" not in section
     p, box, ref, dt = config.plant, config.uncertainty, config.reference, config.dt
     tuning = digital_tuning(p, dt)
+    v = config.envelope().udot_max
     ctrl = make_controller(
         p,
         tuning.lambda1,
@@ -179,28 +171,47 @@ def test_report_has_the_robust_section(tmp_path):
         dt=dt,
         integral_rate=tuning.integral_rate,
     )
-    xd, vd, ad = (float(v[0]) for v in ref.evaluate(np.array([0.0])))
-    start = dict(x0=[xd, vd, 0.0], xhat0=[xd, vd, 0.0])
-    u0 = float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad]))
+    start = start_on_reference(p, ref)
     corners = box.vertices(p)
     duration = max(3 * ref.period, 0.5)
-    batch = simulate_batch(
-        p, ref, corners, dt=dt, duration=duration, controller=ctrl, gains=tuning.gains,
-        delay=tuning.delay, u_prev=u0, **start,
-    )  # fmt: skip
-    assert rob["simulated_window"] == list(batch.window)
+    for obs in ("phso", "phdo"):
+        rob = cert["robust"]["observers"][obs]
+        c = rob["certificate"]
+        assert c["holds"], c["status"]
+        assert c["n_vertices"] == 64
+        # the envelope certified covers the corners' simulated input rate
+        assert rob["envelope"] == max(v, 1.1 * rob["simulated_input_rate_max"])
+        assert c["details"]["udot_max"] == rob["envelope"]
+        est = rob["simulated_worst_estimation_maxe"]
+        assert c["tracking_bound"] >= rob["simulated_worst_maxe"] > 0
+        assert c["estimation_bound"] >= est[0] > 0
+        assert c["x3_estimation_bound"] >= est[2] > 0
+        assert rob["conservatism"] >= 1
+        # recompute the simulated column: the batch at every corner, then the scalar
+        # simulate() at the worst corners, whose full records give the max |error| directly
+        gains = tuning.observer_gains_for(obs)
+        batch = simulate_batch(
+            p, ref, corners, dt=dt, duration=duration, controller=ctrl, gains=gains,
+            observer=obs, delay=tuning.delay, **start,
+        )  # fmt: skip
+        assert rob["simulated_window"] == list(batch.window)
+        assert rob["simulated_input_rate_max"] == pytest.approx(np.max(batch.input_rate_max))
+        for col, want in ((None, rob["simulated_worst_maxe"]), (0, est[0]), (2, est[2])):
+            worst = int(np.argmax(batch.maxe if col is None else batch.estimation_maxe[:, col]))
+            r = simulate(
+                p, ref, dt=dt, duration=duration, controller=ctrl, gains=gains, observer=obs,
+                delay=tuning.delay, true_params=corners[worst], **start,
+            )  # fmt: skip
+            t = np.asarray(r.t)
+            sel = (t >= batch.window[0] - 1e-12) & (t <= batch.window[1] + 1e-12)
+            if col is None:
+                got = float(np.max(np.abs(np.asarray(r.x)[sel, 0] - np.asarray(r.x_d)[sel])))
+            else:
+                got = float(np.max(np.abs(np.asarray(r.xhat) - np.asarray(r.x))[sel, col]))
+            assert got == pytest.approx(want, rel=1e-9), (obs, col)
+            if col is None:
+                u = np.asarray(r.u)
+                rate = np.abs(np.diff(u))[sel[1:]] / dt
+                assert rate.max() <= rob["simulated_input_rate_max"] * (1 + 1e-9)
     w = f"{batch.window[0]:g} .. {batch.window[1]:g} s"
     assert f"the last two reference periods ({w} of {duration:g} s" in md
-    for col, want in ((None, rob["simulated_worst_maxe"]), (0, est[0]), (2, est[2])):
-        worst = int(np.argmax(batch.maxe if col is None else batch.estimation_maxe[:, col]))
-        r = simulate(
-            p, ref, dt=dt, duration=duration, controller=ctrl, gains=tuning.gains,
-            delay=tuning.delay, u_prev=u0, true_params=corners[worst], **start,
-        )  # fmt: skip
-        t = np.asarray(r.t)
-        sel = (t >= batch.window[0] - 1e-12) & (t <= batch.window[1] + 1e-12)
-        if col is None:
-            got = float(np.max(np.abs(np.asarray(r.x)[sel, 0] - np.asarray(r.x_d)[sel])))
-        else:
-            got = float(np.max(np.abs(np.asarray(r.xhat) - np.asarray(r.x))[sel, col]))
-        assert got == pytest.approx(want, rel=1e-9), col

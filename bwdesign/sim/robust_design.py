@@ -52,10 +52,16 @@ from ..model.params import BoucWenParams
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_gains, disturbance_gains_from
-from .batch import simulate_batch
+from .batch import BatchResult, simulate_batch
 from .start import start_on_reference
 
-__all__ = ["RobustDesign", "synthesize_robust", "ENVELOPE_MARGIN"]
+__all__ = [
+    "RobustDesign",
+    "synthesize_robust",
+    "simulate_corners",
+    "certified_envelope",
+    "ENVELOPE_MARGIN",
+]
 
 #: The envelope a candidate is certified for when its simulated corners' input moves
 #: faster than the stage's: this factor times their fastest rate.
@@ -170,19 +176,31 @@ def _shortlist(tuning: DigitalTuning, n: int) -> list[dict[str, Any]]:
     return out[:n]
 
 
-def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
-    """Worst tracking error and input rate simulated at the box's corners."""
+def simulate_corners(
+    params: BoucWenParams,
+    box: UncertaintyBox,
+    reference: Reference,
+    *,
+    dt: float,
+    gains: Any,
+    lambda1: float,
+    lambda2: float,
+    integral_rate: float | None,
+    delay: bool,
+    observer: str = "phso",
+) -> BatchResult:
+    """The sampled loop simulated at every corner of ``box``, started on the reference.
+
+    Three reference periods (0.5 s at least), statistics over the batch's steady
+    window; ``input_rate_max`` is what :func:`certified_envelope` compares with the
+    envelope a robust certificate assumes.
+    """
     ctrl = make_controller(
-        params,
-        c["lambda"],
-        c["lambda"],
-        form="discrete",
-        dt=dt,
-        integral_rate=c["integral_rate"],
+        params, lambda1, lambda2, form="discrete", dt=dt, integral_rate=integral_rate
     )
     start = start_on_reference(params, reference)
     period = reference.period or 1.0
-    res = simulate_batch(
+    return simulate_batch(
         params,
         reference,
         box.vertices(params),
@@ -190,11 +208,32 @@ def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
         duration=max(3 * period, 0.5),
         controller=ctrl,
         observer=observer,
-        gains=c["gains"],
+        gains=gains,
         delay=delay,
         x0=start["x0"],
         xhat0=start["xhat0"],
         u_prev=start["u_prev"],
+    )
+
+
+def certified_envelope(udot_max: float, simulated_rate: float) -> float:
+    """The envelope to certify: the stage's, or ``ENVELOPE_MARGIN`` x a faster simulated rate."""
+    return max(float(udot_max), ENVELOPE_MARGIN * float(simulated_rate))
+
+
+def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
+    """Worst tracking error and input rate simulated at the box's corners."""
+    res = simulate_corners(
+        params,
+        box,
+        reference,
+        dt=dt,
+        gains=c["gains"],
+        lambda1=c["lambda"],
+        lambda2=c["lambda"],
+        integral_rate=c["integral_rate"],
+        delay=delay,
+        observer=observer,
     )
     if not res.stable.all():
         return {"simulated_maxe": None, "simulated_udot_max": None}
@@ -298,7 +337,7 @@ def synthesize_robust(
             continue
         # the envelope the certificate assumes: the stage's, or what the simulated
         # corners need with a margin when their input moves faster
-        env = max(udot_max, ENVELOPE_MARGIN * c["simulated_udot_max"])
+        env = certified_envelope(udot_max, c["simulated_udot_max"])
         rc = certify_robust(
             params,
             c["gains"],
