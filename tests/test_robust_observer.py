@@ -273,3 +273,70 @@ def test_paper_experiment_64_corners_against_brute_force():
     sim = _brute(p, UncertaintyBox.from_dict(PAPER_BOX), n_interior=4, seconds=0.6)
     assert rc.estimation_bound >= sim[0]
     assert rc.x3_estimation_bound >= sim[2]
+
+
+def test_certify_keyword_adds_the_robust_certificate():
+    from bwdesign import certify
+
+    p = _custom()
+    box = UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
+    kw = {"udot_max": UDOT, "dt": DT}
+    plain = certify(p, GAINS, **kw)
+    assert plain.robust is None and "robust" not in plain.to_dict()
+    rep = certify(p, GAINS, uncertainty=box, input_range=RANGE, noise_max=0.01, **kw)
+    direct = certify_robust_observer(
+        p, GAINS, uncertainty=box, input_range=RANGE, noise_max=0.01, **kw
+    )
+    assert rep.robust.holds and rep.robust.estimation_bound == direct.estimation_bound
+    assert rep.to_dict()["robust"]["x3_estimation_bound"] == direct.x3_estimation_bound
+    with pytest.raises(InputError, match="input range"):
+        certify(p, GAINS, uncertainty=box, **kw)
+    with pytest.raises(InputError, match="sample time"):
+        certify(p, GAINS, udot_max=UDOT, uncertainty=box, input_range=RANGE)
+    with pytest.raises(InputError, match="alpha"):
+        certify(
+            p, GAINS, uncertainty=UncertaintyBox.from_dict({"alpha": {"abs": float("inf")}}),
+            input_range=RANGE, **kw,
+        )  # fmt: skip
+
+
+def _stage_file(tmp_path, extra):
+    text = (
+        '[plant]\nname = "custom_stage"\na1 = 159827.5\na2 = 1070.7\na3 = 222665.02\n'
+        "alpha = 0.3836\nbeta = 0.3762\ngamma = 0.0378\n"
+        f"[observer]\ngains = {list(GAINS)}\n[sampling]\ndt = {DT}\n"
+        f"[envelope]\nudot_max = {UDOT}\n" + extra
+    )
+    path = tmp_path / "stage.toml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_cli_runs_the_robust_certificate(tmp_path, capsys):
+    import json
+
+    from bwdesign.cli.main import main
+
+    box = "[uncertainty]\na3 = { rel = 0.02 }\n"
+    f = _stage_file(tmp_path, '[controller]\nlambda1 = 250.0\nlambda2 = 250.0\n'
+                    'u_min = 0.0\nu_max = 150.0\n' + box)  # fmt: skip
+    assert main(["certify", "--plant", f, "--json", "--noise-max", "0.01"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    rob = doc["robust"]
+    assert rob["holds"] and rob["input_range"] == [0.0, 150.0] and rob["noise_max"] == 0.01
+    assert doc["defaults_from_file"]["options"]["--input-range"] == "[controller]"
+    # without limits or reference the range must be given; a bad one is exit 2
+    g = _stage_file(tmp_path, box)
+    assert main(["certify", "--plant", g]) == 2
+    assert "--input-range" in capsys.readouterr().err
+    assert main(["certify", "--plant", g, "--input-range", "5,1"]) == 2
+    assert main(["certify", "--plant", g, "--input-range", "0,150"]) == 0
+    out = capsys.readouterr().out
+    assert "robust observer over [uncertainty]" in out and "holds: yes" in out
+    # a box too wide: the tiers hold, the robust certificate does not -> exit 1
+    wide = _stage_file(tmp_path, "[uncertainty]\nbeta = { rel = 0.95 }\n")
+    assert main(["certify", "--plant", wide, "--input-range", "0,150"]) == 1
+    assert "box is too wide" in capsys.readouterr().out
+    # robust options without a box are a usage error
+    assert main(["certify", "--plant", "paper_experiment", "--gains", "8,64,-512",
+                 "--udot-max", "100", "--noise-max", "0.1"]) == 2  # fmt: skip
