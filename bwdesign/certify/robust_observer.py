@@ -460,17 +460,12 @@ def _certify_K(pb: _Problem, K: np.ndarray, a: float | None) -> RobustObserverCe
     decay = -math.log(av) / (2 * pb.details["dt"])
     if not holds:
         worst = max(margins, key=lambda m: m.value - m.limit)
-        return (
-            _not(
-                pb,
-                f"the solver's P failed the outside check ({worst.name}: "
-                f"min eig {-worst.value:.3g})",
-                av,
-                solver=sol.solver,
-                spectral_radius=spec,
-            )
-            if margins
-            else _not(pb, "the solver gave no verified ellipsoid", av, solver=sol.solver)
+        return _not(
+            pb,
+            f"the solver's P failed the outside check ({worst.name}: min eig {-worst.value:.3g})",
+            av,
+            solver=sol.solver,
+            spectral_radius=spec,
         )
     nb = pb.base
     return RobustObserverCertificate(
