@@ -340,3 +340,17 @@ def test_cli_runs_the_robust_certificate(tmp_path, capsys):
     # robust options without a box are a usage error
     assert main(["certify", "--plant", "paper_experiment", "--gains", "8,64,-512",
                  "--udot-max", "100", "--noise-max", "0.1"]) == 2  # fmt: skip
+
+
+def test_cli_uncertainty_from_another_file(tmp_path, capsys):
+    from bwdesign.cli.main import main
+
+    f = _stage_file(tmp_path, "[uncertainty]\na3 = { rel = 0.02 }\n")
+    base = ["certify", "--plant", "paper_experiment", "--gains", ",".join(map(str, GAINS)),
+            "--udot-max", str(UDOT), "--dt", str(DT)]  # fmt: skip
+    assert main([*base, "--uncertainty-from", f, "--input-range", "0,150"]) == 0
+    assert "holds: yes" in capsys.readouterr().out
+    assert main([*base, "--uncertainty-from", f]) == 2  # no range for a preset
+    assert main([*base, "--uncertainty-from", str(tmp_path / "missing.toml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("error:") == 2 and "Traceback" not in err

@@ -18,6 +18,7 @@ import math
 from ..certify.results import CertificateReport, SynthesisResult
 from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
+from ..model.config import load_config
 from ..output.jsonenc import dump_json
 from .args import (
     EXIT_NO,
@@ -79,6 +80,14 @@ def certify_args(p: argparse.ArgumentParser) -> None:
         "the plant may be driven with, for the robust observer certificate; default: "
         "[controller] u_min, u_max when both are given, else the [reference]'s "
         "feedforward range",
+    )
+    p.add_argument(
+        "--uncertainty-from",
+        default=None,
+        metavar="FILE.toml",
+        help="take the [uncertainty] box from this stage file (e.g. the one bwdesign "
+        "identify writes) instead of the --plant file's; relative half-widths apply to "
+        "the --plant parameters",
     )
     p.add_argument(
         "--noise-max",
@@ -194,11 +203,15 @@ def _robust_request(args: argparse.Namespace, stage: Stage) -> dict:
     """``certify``'s robust keywords from the file's [uncertainty] (empty without one)."""
     cfg = stage.config
     box = None if cfg is None else cfg.uncertainty
+    if args.uncertainty_from is not None:
+        box = load_config(args.uncertainty_from).uncertainty
+        if box is None:
+            raise UsageError(f"--uncertainty-from {args.uncertainty_from}: no [uncertainty] box")
     if box is None:
         if args.input_range is not None or args.noise_max is not None:
             raise UsageError(
                 "--input-range and --noise-max are for the robust observer certificate; "
-                "it needs --plant FILE.toml with an [uncertainty] section"
+                "it needs an [uncertainty] section (--plant FILE.toml or --uncertainty-from)"
             )
         return {}
     if args.dt is None:
@@ -206,12 +219,12 @@ def _robust_request(args: argparse.Namespace, stage: Stage) -> dict:
             "the robust observer certificate over [uncertainty] needs the sample time: "
             "give --dt or a [sampling] dt in the file"
         )
-    ctrl = cfg.controller
+    ctrl = None if cfg is None else cfg.controller
     limits = None
     if ctrl is not None and ctrl.u_min is not None and ctrl.u_max is not None:
         limits = (ctrl.u_min, ctrl.u_max)
     args.input_range = stage.default(args, "input_range", "[controller]", limits)
-    if args.input_range is None and cfg.reference is not None:
+    if args.input_range is None and cfg is not None and cfg.reference is not None:
         from ..model.envelope import given_envelope
         from ..report.tracking import required_input
 
