@@ -25,12 +25,16 @@ homogeneous part uses only model matrices; the box enters through the bounded in
   sequences ``u`` and ``w``: ``m_k = m_c + sum_i h_i (u_{k-i} - u_c, w_{k-i})``. Each
   component is bounded by the steady response ``m_c`` to the range centre ``u_c`` plus
   the l1 norm of the discrete impulse response ``h`` times the half ranges
-  (``(u_hi - u_lo) / 2`` and ``h_max`` of the plant, since ``|Hv(x3)| <= h_max``),
-  summed to a horizon with a rigorous geometric tail (a Lyapunov norm of the plant's
-  ``Phi``). It is a bound for every sample when the plant starts at rest at an
-  equilibrium of an admissible constant input (as if that input had been applied
-  forever); from any other initial state it holds after the plant's own transient
-  ``Phi^k x(0)`` has died out. The input-rate limit is not used there (conservative).
+  (``(u_hi - u_lo) / 2`` and ``h_max`` of the plant, since ``|Hv(x3)| <= h_max`` for a
+  plant that starts with ``|x3| <= h_max``), or, when smaller, by the quasi-static
+  response (steady gain times the ranges) plus the l1 norm of the step-response error
+  ``S - S_i`` times the per-sample increments ``|du| <= udot_max dt`` and the plant's
+  jump ``|dw|`` (summation by parts: this uses the rate limit). The sums run to a
+  horizon with a rigorous geometric tail (a Lyapunov norm of the plant's ``Phi``). It
+  is a bound for every sample when the plant starts at rest at an equilibrium of an
+  admissible constant input (as if that input had been applied forever); from any
+  other initial state it holds after the plant's own transient ``Phi^k x(0)`` has
+  died out.
 
 Certificate
 -----------
@@ -184,9 +188,15 @@ def _response_l1(
 
 
 def _mismatch_bound(
-    model: BoucWenParams, tp: BoucWenParams, dt: float, u_lo: float, u_hi: float
+    model: BoucWenParams, tp: BoucWenParams, dt: float, u_lo: float, u_hi: float, du: float
 ) -> np.ndarray:
-    """Bound of ``|m|`` (rows 1, 2) for plant ``tp`` over the input range (module doc)."""
+    """Bound of ``|m|`` (rows 1, 2) for plant ``tp`` over the input range (module doc).
+
+    Per component the smaller of two valid bounds: the amplitude one ``|m_c| + l1(h^u)
+    u_r + l1(h^w) h_max`` and the rate one (summation by parts, ``S = sum h``):
+    ``|S^u u_c| + |S^u| u_r + |S^w| h_max + l1(S - S_i)^u |du| + l1(S - S_i)^w |dw|``
+    with ``|dw| <= (alpha + (|beta| + |gamma|) h_max) |du|`` the plant's jump.
+    """
     zm, zv = discretize(model, dt), discretize(tp, dt)
     Phim, Phiv = np.asarray(zm.F)[:2, :2], np.asarray(zv.F)[:2, :2]
     bwm, bwv = np.asarray(zm.F)[:2, 2], np.asarray(zv.F)[:2, 2]
@@ -194,12 +204,25 @@ def _mismatch_bound(
     dPhi = Phim - Phiv
     uc, ur = (u_hi + u_lo) / 2, (u_hi - u_lo) / 2
     hv = tp.bounded_class().h_max
-    x12c = np.linalg.solve(np.eye(2) - Phiv, buv * uc)
-    mc = dPhi @ x12c + (bum - buv) * uc
+    dw = (tp.alpha + (abs(tp.beta) + abs(tp.gamma)) * hv) * du
     w0 = math.sqrt(tp.a1)
-    lu = _response_l1(Phiv, buv, dPhi, bum - buv, w0)
-    lw = _response_l1(Phiv, bwv, dPhi, bwm - bwv, w0)
-    return np.abs(mc) + ur * lu + hv * lw
+    R = np.linalg.inv(np.eye(2) - Phiv)
+    Su = dPhi @ R @ buv + (bum - buv)  # steady gains, so m_c = Su u_c
+    Sw = dPhi @ R @ bwv + (bwm - bwv)
+    amplitude = (
+        np.abs(Su * uc)
+        + ur * _response_l1(Phiv, buv, dPhi, bum - buv, w0)
+        + hv * _response_l1(Phiv, bwv, dPhi, bwm - bwv, w0)
+    )
+    zero = np.zeros(2)
+    rate = (
+        np.abs(Su * uc)
+        + np.abs(Su) * ur
+        + np.abs(Sw) * hv
+        + du * _response_l1(Phiv, R @ buv, dPhi, zero, w0)
+        + dw * _response_l1(Phiv, R @ bwv, dPhi, zero, w0)
+    )
+    return np.minimum(amplitude, rate)
 
 
 def _jump_mismatch(model: BoucWenParams, tp: BoucWenParams, du: float) -> float:
@@ -280,7 +303,7 @@ def _problem(
     per = []
     for tp in [*vertices, *interior]:
         dh = _jump_mismatch(params, tp, du)
-        per.append(np.concatenate([[dh], _mismatch_bound(params, tp, dt, u_lo, u_hi)]))
+        per.append(np.concatenate([[dh], _mismatch_bound(params, tp, dt, u_lo, u_hi, du)]))
     per = np.array(per)
     nv = len(vertices)
     W = per.max(axis=0)
@@ -341,8 +364,18 @@ def _check(Q: np.ndarray, lam: np.ndarray, a: float, blocks) -> list[Margin]:
     return margins
 
 
-def _golden(f, lo: float, hi: float, iters: int = 8) -> None:
-    """Golden-section search of ``f`` on ``[lo, hi]`` (``f`` caches its own results)."""
+def _search(f, grid: list[float], iters: int = 5) -> None:
+    """Minimise ``f`` over ``x = log(1 - a)``: the grid, then golden section around its best.
+
+    The grid first, because a solver failure (``f = inf``) at a single point would
+    mislead a golden-section search started on the whole interval (observed: bounds
+    off by 4x at some boxes). ``f`` caches its own results.
+    """
+    vals = [f(x) for x in grid]
+    i = int(np.argmin(vals))
+    if not math.isfinite(vals[i]):
+        return
+    lo, hi = sorted((grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]))
     g = (math.sqrt(5) - 1) / 2
     x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
     for _ in range(iters):
@@ -417,7 +450,8 @@ def _certify_K(pb: _Problem, K: np.ndarray, a: float | None) -> RobustObserverCe
                 cache[x] = (sol, av, sol.objective if sol.ok else math.inf)
             return cache[x][2]
 
-        _golden(f, math.log(1e-6), math.log(1 - spec**2))
+        lo, hi = math.log(1e-6), math.log(1 - spec**2)
+        _search(f, list(np.linspace(hi, lo, 12)))
         ok = [v for v in cache.values() if v[0].ok]
         sol, av = min(ok, key=lambda v: v[2])[:2] if ok else (None, math.nan)
     else:
@@ -676,13 +710,7 @@ def synthesize_robust_observer(
             cache[x] = (sol, sol.objective if sol.ok else math.inf, 1 - math.exp(x))
         return cache[x][1]
 
-    # a coarse grid of contractions first (the program is numerically hard near a = 1),
-    # then golden section between the best point's neighbours
-    grid = [math.log(1 - a) for a in _GRID]
-    vals = [f(x) for x in grid]
-    i = int(np.argmin(vals))
-    if math.isfinite(vals[i]):
-        _golden(f, grid[min(i + 1, len(grid) - 1)], grid[max(i - 1, 0)], iters=6)
+    _search(f, [math.log(1 - a) for a in _GRID])
     ok = [v for v in cache.values() if v[0].ok]
     if not ok:
         last = next(iter(cache.values()))[0]
