@@ -78,7 +78,6 @@ __all__ = [
     "synthesize_robust_observer",
 ]
 
-_CHANNELS = ("dh", "m1", "m2", "noise")
 _C = np.array([1.0, 0.0, 0.0])
 #: Contractions per sample tried first by the synthesis (then refined).
 _GRID = (0.5, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995, 0.998)
@@ -107,8 +106,8 @@ class RobustObserverCertificate:
         ``(u_lo, u_hi)`` (input unit) the plant may be driven with.
     n_vertices, n_interior : int
     input_bounds : dict
-        Bound of each exogenous channel: ``dh``, the mismatch ``m1``, ``m2`` (length
-        unit, length unit per s... as the rows of ``F``), ``noise``.
+        Bound of each exogenous channel per sample: ``dh`` (length unit), the mismatch
+        rows ``m1`` (length unit) and ``m2`` (length unit/s), ``noise`` (length unit).
     margins : tuple of Margin
         Smallest eigenvalue per checked block (passed when ``-min eig < 0``).
     solver : str
