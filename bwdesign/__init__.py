@@ -9,6 +9,12 @@ from .certify.disturbance import LumpedCertificate, certify_disturbance
 from .certify.linear import ErrorDynamics, HysteresisBode, error_dynamics, hysteresis_bode
 from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
 from .certify.robust import RobustCertificate, certify_robust
+from .certify.robust_observer import (
+    RobustObserverCertificate,
+    RobustObserverSynthesis,
+    certify_robust_observer,
+    synthesize_robust_observer,
+)
 from .certify.synthesis import synthesize
 from .certify.tiers import certify, certify_discrete
 from .codegen.export import CExport, export_c
@@ -107,6 +113,10 @@ __all__ = [
     "RobustCertificate",
     "synthesize_robust",
     "RobustDesign",
+    "certify_robust_observer",
+    "synthesize_robust_observer",
+    "RobustObserverCertificate",
+    "RobustObserverSynthesis",
     "synthesize",
     "CertificateReport",
     "TierCertificate",

@@ -20,6 +20,12 @@ from .linear import (
 )
 from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCertificate
 from .robust import RobustCertificate, certify_robust
+from .robust_observer import (
+    RobustObserverCertificate,
+    RobustObserverSynthesis,
+    certify_robust_observer,
+    synthesize_robust_observer,
+)
 from .synthesis import default_pole_radius, synthesize
 from .tiers import certify, certify_discrete
 
@@ -36,6 +42,10 @@ __all__ = [
     "certify_discrete",
     "certify_robust",
     "RobustCertificate",
+    "certify_robust_observer",
+    "synthesize_robust_observer",
+    "RobustObserverCertificate",
+    "RobustObserverSynthesis",
     "synthesize",
     "default_pole_radius",
     "ErrorDynamics",

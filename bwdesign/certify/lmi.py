@@ -56,6 +56,7 @@ __all__ = [
     "lumped_margin",
     "lumped_sampled_synthesis",
     "robust_ellipsoid",
+    "robust_observer_synthesis",
     "theorem1_synthesis",
     "lipschitz_synthesis",
 ]
@@ -158,7 +159,11 @@ def solver_versions() -> dict[str, str]:
 
 
 def solve(
-    problem: cp.Problem, variables: Mapping[str, cp.Variable], *, first_only: bool = False
+    problem: cp.Problem,
+    variables: Mapping[str, cp.Variable],
+    *,
+    first_only: bool = False,
+    options: Mapping[str, Any] | None = None,
 ) -> LMISolution:
     """Solve with Clarabel, fall back to SCS, accept only ``OPTIMAL``.
 
@@ -170,6 +175,8 @@ def solve(
     first_only : bool
         Try only the first solver (synthesis: its exact pole search is a better
         fall-back than a slow SCS run on an ill-conditioned program).
+    options : mapping, optional
+        Extra options of the first solver (merged over the defaults).
 
     Returns
     -------
@@ -179,13 +186,14 @@ def solve(
     attempts: list[str] = []
     last_status = "solver_error"
     last_solver = ""
-    for solver in SOLVERS[:1] if first_only else SOLVERS:
+    for i, solver in enumerate(SOLVERS[:1] if first_only else SOLVERS):
+        opts = _OPTIONS[solver] | (dict(options or {}) if i == 0 else {})
         try:
             with warnings.catch_warnings(), _quiet_c_output(solver in _NOISY):
                 warnings.simplefilter("ignore")
                 # warm_start=False: a reused (cached) program must give the same
                 # answer as a fresh one, so reports are reproducible bit for bit.
-                problem.solve(solver=solver, warm_start=False, **_OPTIONS[solver])
+                problem.solve(solver=solver, warm_start=False, **opts)
         except cp.error.SolverError as err:
             attempts.append(f"{solver}: solver error: {' '.join(str(err).split())[:200]}")
             last_status, last_solver = "solver_error", solver
@@ -708,6 +716,48 @@ def robust_ellipsoid(
         cons.append(_sym(M) >> eps * np.eye(2 * n + m))
     prob = cp.Problem(cp.Minimize(cc @ Q @ cc), cons)
     return solve(prob, {"Q": Q, "lam": lam}, first_only=True)
+
+
+def robust_observer_synthesis(
+    F: np.ndarray,
+    Bw: np.ndarray,
+    c: np.ndarray,
+    *,
+    rho: tuple[float, float],
+    a: float,
+    noise: float,
+    disk: tuple[float, float] | None = None,
+    eps: float = 1e-7,
+) -> LMISolution:
+    """Gain ``K = P^-1 Y`` minimising the peak of ``c'e``, ``e+ = (I - K C)(F D_i e + Bw w) + K n``.
+
+    ``C = e1'``, ``D_i = diag(1, 1, rho_i)``, ``V = e'Pe``, inputs normalised (``n`` by
+    ``noise``). With ``Y = P K``, ``G = P - Y C``: ``[[a P, 0, (G F D_i)'], [0, (1-a)
+    diag(lam), (PB)'], [G F D_i, PB, P]] >= eps I`` with ``PB = [G Bw, noise Y]``,
+    ``sum(lam) <= 1``, ``P >= eps I``, optionally the nominal poles in the disk ``disk =
+    (centre, r)`` (``[[r P, M'], [M, r P]] >= eps I``, ``M = G F - centre P``); minimises
+    ``g >= c'P^-1 c`` (Schur), the squared peak of ``c'e`` on ``{e'Pe <= 1}``. Clarabel runs
+    without chordal decomposition (with it, these programs failed often).
+    """
+    F, Bw, cc = np.asarray(F, float), np.asarray(Bw, float), np.asarray(c, float).reshape(3, 1)
+    m = Bw.shape[1] + int(noise > 0)
+    P, Y = cp.Variable((3, 3), symmetric=True), cp.Variable((3, 1))
+    lam, g = cp.Variable(m, nonneg=True), cp.Variable()
+    G = P - Y @ np.array([[1.0, 0.0, 0.0]])
+    PB = G @ Bw if noise <= 0 else cp.hstack([G @ Bw, float(noise) * Y])
+    epi = cp.bmat([[cp.reshape(g, (1, 1), order="C"), cc.T], [cc, P]])
+    cons = [P >> eps * _I3, cp.sum(lam) <= 1.0, _sym(epi) >> 0]
+    for r in rho:
+        PA = G @ F @ np.diag([1.0, 1.0, float(r)])
+        Z = np.zeros((3, m))
+        M = cp.bmat([[a * P, Z, PA.T], [Z.T, (1 - a) * cp.diag(lam), PB.T], [PA, PB, P]])
+        cons.append(_sym(M) >> eps * np.eye(6 + m))
+    if disk is not None:
+        PM = G @ F - disk[0] * P
+        cons.append(_sym(cp.bmat([[disk[1] * P, PM.T], [PM, disk[1] * P]])) >> eps * np.eye(6))
+    variables = {"P": P, "Y": Y, "lam": lam, "g": g}
+    opts = {"chordal_decomposition_enable": False}
+    return solve(cp.Problem(cp.Minimize(g), cons), variables, first_only=True, options=opts)
 
 
 def theorem1_synthesis(Ahat: np.ndarray, *, mu: float, lmax: float) -> LMISolution:

@@ -169,6 +169,9 @@ class CertificateReport:
         The discrete update gain ``K`` the ``sampled`` tier certified.
     certificates : tuple of TierCertificate
         One per tier, weakest first.
+    robust : RobustObserverCertificate or None
+        The observer error over an uncertainty box
+        (:func:`bwdesign.certify_robust_observer`), ``None`` without a box.
     """
 
     params: BoucWenParams
@@ -178,6 +181,7 @@ class CertificateReport:
     dt: float | None
     discrete_gains: tuple[float, float, float] | None
     certificates: tuple[TierCertificate, ...]
+    robust: Any = None
 
     @property
     def certified(self) -> bool:
@@ -208,8 +212,8 @@ class CertificateReport:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict with keys ``plant``, ``gains``, ``udot_max``,
         ``certificates``, ``certified``, ``best`` (plus ``decay``, ``dt``,
-        ``discrete_gains``)."""
-        return {
+        ``discrete_gains``, and ``robust`` when a box was given)."""
+        out = {
             "plant": self.params.to_dict(),
             "gains": None if self.gains is None else list(self.gains),
             "udot_max": self.udot_max,
@@ -220,6 +224,9 @@ class CertificateReport:
             "certified": self.certified,
             "best": self.best,
         }
+        if self.robust is not None:  # only when asked for (documents without a box unchanged)
+            out["robust"] = self.robust.to_dict()
+        return out
 
 
 @dataclass(frozen=True)

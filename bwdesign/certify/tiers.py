@@ -77,6 +77,7 @@ from scipy.linalg import solve_continuous_lyapunov
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time
+from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import _as_gains, check_gains, discrete_gains, error_matrix
 from ..validate import DECAY, UDOT_MAX, real
 from .checks import (
@@ -111,6 +112,7 @@ from .results import (
     TierCertificate,
     _frozen,
 )
+from .robust_observer import certify_robust_observer
 
 __all__ = ["certify", "certify_discrete"]
 
@@ -530,6 +532,9 @@ def certify(
     dt: float | None = None,
     tiers: Sequence[str] | None = None,
     allow_unbounded: bool = False,
+    uncertainty: UncertaintyBox | None = None,
+    input_range: tuple[float, float] | None = None,
+    noise_max: float = 0.0,
 ) -> CertificateReport:
     """Certify observer gains for an input-rate envelope, tier by tier.
 
@@ -552,19 +557,28 @@ def certify(
         (``sampled`` only when ``dt`` is given).
     allow_unbounded : bool
         Accept a model outside the bounded Bouc-Wen class.
+    uncertainty : UncertaintyBox, optional
+        Also certify the sampled observer error over every plant of this box
+        (:func:`bwdesign.certify_robust_observer`, the report's ``robust``); needs
+        ``dt`` and ``input_range``.
+    input_range : (float, float), optional
+        ``(u_lo, u_hi)`` (V): the inputs the plant may be driven with (with ``uncertainty``).
+    noise_max : float
+        Sensor noise bound (length unit) the robust certificate assumes.
 
     Returns
     -------
     CertificateReport
-        One :class:`TierCertificate` per tier. Solver trouble is a status in
-        the report, never an exception.
+        One :class:`TierCertificate` per tier (and ``robust``). Solver trouble is a
+        status in the report, never an exception.
 
     Raises
     ------
     GainError
         Malformed gains, or gains violating the paper's Hurwitz conditions (4).
     InputError
-        ``udot_max``, ``decay`` or ``dt`` out of range.
+        ``udot_max``, ``decay`` or ``dt`` out of range; ``uncertainty`` without ``dt``
+        or ``input_range``, or with an undetermined (infinite) half-width.
     UnboundedModelError
         The model is outside the bounded class and ``allow_unbounded`` is False.
 
@@ -581,6 +595,20 @@ def certify(
     if dt is not None:
         dt = check_sample_time(params, dt)
     gains = tuple(check_gains(params, gains).tolist())
+    if uncertainty is not None:
+        if dt is None or input_range is None:
+            raise InputError(
+                "a robust certificate over the uncertainty box needs the sample time dt (s) "
+                "and the input range (u_lo, u_hi)"
+            )
+        if not isinstance(uncertainty, UncertaintyBox):
+            raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
+        bad = uncertainty.undetermined()
+        if bad:
+            raise InputError(
+                f"[uncertainty] {', '.join(bad)}: half-width not determined (inf); give a "
+                "finite range for a robust certificate"
+            )
     sc = _scale_continuous(params, error_matrix(params, gains))
     if tiers is None:
         wanted = TIERS if dt is not None else TIERS[:3]
@@ -602,6 +630,17 @@ def certify(
         K = discrete_gains(params, gains, dt)
         if "sampled" in wanted:
             certs.append(_sampled(params, K, udot_max, decay, dt))
+    robust = None
+    if uncertainty is not None:
+        robust = certify_robust_observer(
+            params,
+            gains,
+            dt=dt,
+            uncertainty=uncertainty,
+            udot_max=udot_max,
+            input_range=input_range,
+            noise_max=noise_max,
+        )
     return CertificateReport(
         params=params,
         gains=gains,
@@ -610,6 +649,7 @@ def certify(
         dt=dt,
         discrete_gains=None if K is None else (float(K[0]), float(K[1]), float(K[2])),
         certificates=tuple(certs),
+        robust=robust,
     )
 
 

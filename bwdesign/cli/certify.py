@@ -1,7 +1,8 @@
 """``bwdesign certify`` and ``bwdesign synthesize`` (registered in :mod:`bwdesign.cli`).
 
-Exit codes: 0 certified (or gains found), 1 nothing certified (or infeasible),
-2 bad input with one ``error:`` line.
+Exit codes: 0 certified (or gains found), 1 nothing certified (or infeasible, or
+the robust observer certificate over a file's [uncertainty] does not hold), 2 bad
+input with one ``error:`` line.
 
 With ``--plant FILE.toml`` the file's ``[observer]`` gains, ``[sampling]`` dt,
 ``[envelope]`` and ``[synthesis]`` are the defaults of ``--gains``, ``--dt``,
@@ -17,6 +18,7 @@ import math
 from ..certify.results import CertificateReport, SynthesisResult
 from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
+from ..model.config import load_config
 from ..output.jsonenc import dump_json
 from .args import (
     EXIT_NO,
@@ -69,6 +71,44 @@ def certify_args(p: argparse.ArgumentParser) -> None:
         "default: [observer] gains of a --plant FILE.toml",
     )
     _envelope_args(p)
+    p.add_argument(
+        "--input-range",
+        type=_input_range,
+        default=None,
+        metavar="LO,HI",
+        help="with an [uncertainty] section in --plant FILE.toml: the inputs (input unit) "
+        "the plant may be driven with, for the robust observer certificate; default: "
+        "[controller] u_min, u_max when both are given, else the [reference]'s "
+        "feedforward range",
+    )
+    p.add_argument(
+        "--uncertainty-from",
+        default=None,
+        metavar="FILE.toml",
+        help="take the [uncertainty] box from this stage file (e.g. the one bwdesign "
+        "identify writes) instead of the --plant file's; relative half-widths apply to "
+        "the --plant parameters",
+    )
+    p.add_argument(
+        "--noise-max",
+        type=nonneg_float,
+        default=None,
+        metavar="N",
+        help="sensor noise bound |n| <= N (length unit) the robust certificate assumes "
+        "(default 0). When the file has an [uncertainty] section the robust observer "
+        "certificate over its box is also run, and the exit code is 1 if it does not hold",
+    )
+
+
+def _input_range(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        lo, hi = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO,HI (two numbers), got {text!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise argparse.ArgumentTypeError(f"expected finite LO < HI, got {text!r}")
+    return lo, hi
 
 
 def synthesize_args(p: argparse.ArgumentParser) -> None:
@@ -187,8 +227,72 @@ def _print_report(rep: CertificateReport) -> None:
         print("certified: no (no tier holds)")
 
 
+def _robust_request(args: argparse.Namespace, stage: Stage) -> dict:
+    """``certify``'s robust keywords from the file's [uncertainty] (empty without one)."""
+    cfg = stage.config
+    box = None if cfg is None else cfg.uncertainty
+    if args.uncertainty_from is not None:
+        box = load_config(args.uncertainty_from).uncertainty
+        if box is None:
+            raise UsageError(f"--uncertainty-from {args.uncertainty_from}: no [uncertainty] box")
+    if box is None:
+        if args.input_range is not None or args.noise_max is not None:
+            raise UsageError(
+                "--input-range and --noise-max are for the robust observer certificate; "
+                "it needs an [uncertainty] section (--plant FILE.toml or --uncertainty-from)"
+            )
+        return {}
+    if args.dt is None:
+        raise UsageError(
+            "the robust observer certificate over [uncertainty] needs the sample time: "
+            "give --dt or a [sampling] dt in the file"
+        )
+    ctrl = None if cfg is None else cfg.controller
+    limits = None
+    if ctrl is not None and ctrl.u_min is not None and ctrl.u_max is not None:
+        limits = (ctrl.u_min, ctrl.u_max)
+    args.input_range = stage.default(args, "input_range", "[controller]", limits)
+    if args.input_range is None and cfg is not None and cfg.reference is not None:
+        from ..model.envelope import given_envelope
+        from ..report.tracking import required_input
+
+        env = cfg.envelope(allow_unbounded=args.allow_unbounded) or given_envelope(args.udot_max)
+        rng = required_input(cfg, env, allow_unbounded=args.allow_unbounded)
+        args.input_range = stage.default(args, "input_range", "[reference]", rng)
+    if args.input_range is None:
+        raise UsageError(
+            "the robust observer certificate over [uncertainty] needs the input range: give "
+            "--input-range LO,HI, or [controller] u_min and u_max, or a [reference]"
+        )
+    return {
+        "uncertainty": box,
+        "input_range": tuple(args.input_range),
+        "noise_max": 0.0 if args.noise_max is None else args.noise_max,
+    }
+
+
+def _print_robust(rep: CertificateReport) -> None:
+    rc = rep.robust
+    p = rep.params
+    lo, hi = rc.input_range
+    print(
+        f"robust observer over [uncertainty] ({rc.n_vertices} corners + {rc.n_interior} "
+        f"interior points, u in [{lo:g}, {hi:g}] {p.input_unit}, |n| <= {rc.noise_max:g} "
+        f"{p.length_unit}):"
+    )
+    if rc.holds:
+        print(
+            f"  holds: yes: steady |x1hat - x1| <= {rc.estimation_bound:.4g} {p.length_unit}, "
+            f"|x3hat - x3| <= {rc.x3_estimation_bound:.4g} {p.length_unit}, "
+            f"convergence >= {rc.decay:.4g} 1/s"
+        )
+    else:
+        print(f"  holds: no: {rc.status}")
+
+
 def run_certify(args: argparse.Namespace) -> int:
-    """Run ``bwdesign certify``; exit 0 when a tier holds, 1 when none does."""
+    """Run ``bwdesign certify``; exit 0 when a tier holds (and the robust certificate, when
+    the file has an [uncertainty] section), 1 otherwise."""
     stage = load_stage(args.plant)
     params = stage.params
     if stage.config is not None:
@@ -198,6 +302,7 @@ def run_certify(args: argparse.Namespace) -> int:
             "--gains l1,l2,l3 is required, unless --plant is a stage file with [observer] gains"
         )
     _envelope(args, stage)
+    robust = _robust_request(args, stage)
     rep = certify(
         params,
         args.gains,
@@ -205,13 +310,17 @@ def run_certify(args: argparse.Namespace) -> int:
         decay=args.decay,
         dt=args.dt,
         allow_unbounded=args.allow_unbounded,
+        **robust,
     )
     if args.json:
         print(dump_json(_json(rep.to_dict(), params, stage)))
     else:
         _note(stage)
         _print_report(rep)
-    return EXIT_OK if rep.certified else EXIT_NO
+        if rep.robust is not None:
+            _print_robust(rep)
+    ok = rep.certified and (rep.robust is None or rep.robust.holds)
+    return EXIT_OK if ok else EXIT_NO
 
 
 def _json(doc: dict, params, stage: Stage) -> dict:
