@@ -715,7 +715,8 @@ def robust_ellipsoid(
         )
         cons.append(_sym(M) >> eps * np.eye(2 * n + m))
     prob = cp.Problem(cp.Minimize(cc @ Q @ cc), cons)
-    return solve(prob, {"Q": Q, "lam": lam}, first_only=True)
+    opts = {"chordal_decomposition_enable": False}
+    return solve(prob, {"Q": Q, "lam": lam}, first_only=True, options=opts)
 
 
 def robust_observer_synthesis(

@@ -218,7 +218,9 @@ def simulate_corners(
 
 def certified_envelope(udot_max: float, simulated_rate: float) -> float:
     """The envelope to certify: the stage's, or ``ENVELOPE_MARGIN`` x a faster simulated rate."""
-    return max(float(udot_max), ENVELOPE_MARGIN * float(simulated_rate))
+    if float(simulated_rate) <= float(udot_max):
+        return float(udot_max)
+    return ENVELOPE_MARGIN * float(simulated_rate)
 
 
 def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
