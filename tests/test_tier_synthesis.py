@@ -7,7 +7,7 @@ import pytest
 
 from bwdesign import preset, synthesize
 from bwdesign.certify.tier_synthesis import _cl, _scaled
-from bwdesign.errors import InputError
+from bwdesign.errors import InputError, UnboundedModelError
 
 
 def test_default_behaviour_is_unchanged():
@@ -44,3 +44,13 @@ def test_unknown_tier_and_sampled_without_dt():
         synthesize(p, udot_max=100.0, tier="nope")
     with pytest.raises(InputError):
         synthesize(p, udot_max=100.0, tier="sampled")
+
+
+def test_allow_unbounded_reaches_the_recertification():
+    # beta < 0 is outside the bounded class: refused unless asked for, then synthesised
+    p = preset("paper_experiment").replace(beta=-0.2, name="unbounded_stage")
+    for tier in ("theorem1", "lipschitz"):
+        with pytest.raises(UnboundedModelError):
+            synthesize(p, udot_max=1e-3, tier=tier)
+        res = synthesize(p, udot_max=1e-3, tier=tier, allow_unbounded=True)
+        assert res.feasible and res.report is not None, res.reason

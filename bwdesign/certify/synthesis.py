@@ -135,7 +135,9 @@ def synthesize(
     if tier in ("theorem1", "lipschitz"):
         from .tier_synthesis import synthesize_tier
 
-        return synthesize_tier(params, tier, udot_max=udot_max, decay=decay)
+        return synthesize_tier(
+            params, tier, udot_max=udot_max, decay=decay, allow_unbounded=allow_unbounded
+        )
     if tier == "sampled" and dt is None:
         raise InputError("the sampled tier needs the sample time dt (s)")
     if dt is None or tier == "sector":

@@ -83,7 +83,12 @@ def _refused(params, tier, udot_max, decay, status) -> SynthesisResult:
 
 
 def synthesize_tier(
-    params: BoucWenParams, tier: str, *, udot_max: float, decay: float
+    params: BoucWenParams,
+    tier: str,
+    *,
+    udot_max: float,
+    decay: float,
+    allow_unbounded: bool = False,
 ) -> SynthesisResult:
     """Synthesise gains for ``tier`` in ``("theorem1", "lipschitz")`` (see the module doc)."""
     from . import lmi
@@ -139,7 +144,14 @@ def synthesize_tier(
     report = None
     if gains is not None:
         try:
-            report = certify(params, gains, udot_max=udot_max, decay=decay, tiers=(tier,))
+            report = certify(
+                params,
+                gains,
+                udot_max=udot_max,
+                decay=decay,
+                tiers=(tier,),
+                allow_unbounded=allow_unbounded,
+            )
         except ValueError as err:  # the gains break the Hurwitz conditions: not a design
             status = f"{status}; re-certification refused the gains: {err}"
             gains = None
