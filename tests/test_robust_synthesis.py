@@ -166,6 +166,10 @@ def test_cli_robust_needs_a_box_and_refuses_a_tier(tmp_path):
     assert r.returncode == 2 and "--tier and --robust" in r.stderr
     r = _cli("synthesize", "--plant", "paper_experiment", "--udot-max", "100", "--observer", "phdo")
     assert r.returncode == 2 and "--observer applies to --robust only" in r.stderr
+    r = _cli("synthesize", "--plant", "paper_experiment", "--udot-max", "100", "--noise-max", "1")
+    assert r.returncode == 2 and "--noise-max applies to --robust only" in r.stderr
+    r = _cli("synthesize", "--plant", str(f), "--robust", "--decay", "0")
+    assert r.returncode == 2 and "--decay does not apply to --robust" in r.stderr
 
 
 def test_cli_synthesize_per_tier():

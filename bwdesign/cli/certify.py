@@ -139,9 +139,10 @@ def synthesize_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--noise-max",
         type=nonneg_float,
-        default=0.0,
+        default=None,
         metavar="N",
-        help="with --robust: sensor noise bound |n| <= N (length unit) of the certified bounds",
+        help="with --robust: sensor noise bound |n| <= N (length unit) of the certified bounds "
+        "(default 0)",
     )
     p.add_argument(
         "--observer",
@@ -367,6 +368,21 @@ def _print_synthesis(res: SynthesisResult) -> None:
 
 def run_synthesize(args: argparse.Namespace) -> int:
     """Run ``bwdesign synthesize``; exit 0 with gains, 1 when infeasible."""
+    if args.robust:
+        given = [
+            f"--{k.replace('_', '-')}"
+            for k in ("decay", "pole_radius")
+            if getattr(args, k) is not None
+        ]
+        if given:
+            raise UsageError(
+                f"{' and '.join(given)} {'does' if len(given) == 1 else 'do'} not apply to "
+                "--robust (it designs the sampled loop for the smallest certified tracking bound)"
+            )
+    else:
+        for opt in ("observer", "noise_max"):
+            if getattr(args, opt) is not None:
+                raise UsageError(f"--{opt.replace('_', '-')} applies to --robust only")
     stage = load_stage(args.plant)
     params = stage.params
     _envelope(args, stage)
@@ -375,8 +391,6 @@ def run_synthesize(args: argparse.Namespace) -> int:
         args.pole_radius = stage.default(
             args, "pole_radius", "[synthesis]", spec.get("pole_radius")
         )
-    if args.observer is not None and not args.robust:
-        raise UsageError("--observer applies to --robust only")
     if args.robust:
         if args.tier is not None:
             raise UsageError(

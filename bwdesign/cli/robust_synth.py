@@ -99,7 +99,7 @@ def run_robust(args: argparse.Namespace, stage: Stage) -> int:
         uncertainty=cfg.uncertainty,
         udot_max=args.udot_max,
         reference=cfg.reference,
-        noise_max=args.noise_max,
+        noise_max=args.noise_max or 0.0,
         observer=args.observer or "phdo",
     )
     if args.json:
