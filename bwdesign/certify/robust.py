@@ -113,6 +113,7 @@ from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_disturbance_gains, check_gains, discrete_gains
 from ..validate import UDOT_MAX, real
 from .checks import rho_interval
+from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction, solution
 from .results import Margin
 
 __all__ = ["RobustCertificate", "certify_robust"]
@@ -246,34 +247,10 @@ def _matrices(lp: _Loop, Fv, gv, rho: float) -> tuple[np.ndarray, np.ndarray]:
     return A, B
 
 
-def _solution(sol: Any) -> tuple[np.ndarray, np.ndarray]:
-    Q = np.asarray(sol["Q"])
-    return (Q + Q.T) / 2, np.maximum(np.asarray(sol["lam"]), 0.0)
-
-
-def _block_min_eig(Q: np.ndarray, lam: np.ndarray, A: np.ndarray, B: np.ndarray, a: float) -> float:
-    """Smallest eigenvalue of one diagonally normalised Schur block of the LMI (> 0 passes)."""
-    n, m = Q.shape[0], lam.size
-    M = np.block(
-        [
-            [a * Q, np.zeros((n, m)), Q @ A.T],
-            [np.zeros((m, n)), (1 - a) * np.diag(lam), B.T],
-            [A @ Q, B, Q],
-        ]
-    )
-    M = (M + M.T) / 2
-    dg = np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))
-    return float(np.linalg.eigvalsh(M / np.outer(dg, dg)).min())
-
-
 def _hyst_bounds(model: BoucWenParams, tp: BoucWenParams, du: float) -> tuple[float, float, float]:
-    hm = model.bounded_class().h_max
     hv = tp.bounded_class().h_max
-    H = max(hm, hv)
     j = (tp.alpha + (abs(tp.beta) + abs(tp.gamma)) * hv) * du
-    c = abs(model.beta) + abs(model.gamma)
-    df = abs(model.alpha - tp.alpha) + (abs(model.beta - tp.beta) + abs(model.gamma - tp.gamma)) * H
-    return hv, j, df * du * math.exp(c * du)
+    return hv, j, jump_mismatch(model, tp, du)
 
 
 def certify_robust(
@@ -502,11 +479,11 @@ def certify_robust(
             )
             if not sol.ok:
                 return sol
-            Q, lam = _solution(sol)
+            Q, lam = solution(sol)
             bad = [
                 i
                 for i in range(len(blocks_v), len(blocks))
-                if i not in idx and _block_min_eig(Q, lam, *blocks[i], av) <= _ACTIVE_TOL
+                if i not in idx and schur_min_eig(Q, lam, *blocks[i], av) <= _ACTIVE_TOL
             ]
             if not bad:
                 return sol
@@ -514,10 +491,10 @@ def certify_robust(
                 active.setdefault(blocks[i][0].tobytes() + blocks[i][1].tobytes(), i)
 
     def check(sol, av: float):
-        Q, lam = _solution(sol)
+        Q, lam = solution(sol)
         margins = [Margin("Q > 0", -float(np.linalg.eigvalsh(Q).min()), 0.0)]
         for idx, (A, B) in enumerate(blocks):
-            ev = _block_min_eig(Q, lam, A, B, av)
+            ev = schur_min_eig(Q, lam, A, B, av)
             where = "corner" if idx < len(blocks_v) else "interior"
             margins.append(Margin(f"Schur block {idx} ({where}) > 0", -ev, 0.0))
         gam = float(lam.sum())
@@ -561,10 +538,7 @@ def certify_robust(
         return worst
 
     if a is None:
-        # the contraction on x = log(1 - a): a coarse grid first (the program is badly
-        # conditioned as a -> 1 and infeasible near a = spectral radius^2, so a bracket
-        # from the ends alone can fail on both sides), then a golden-section refinement
-        # around the best grid point
+        # the contraction on x = log(1 - a): a coarse grid, then golden section
         rad = spec**2
         lo, hi = math.log(1e-5), math.log(1 - rad)
         best = None
@@ -578,19 +552,7 @@ def certify_robust(
             return cache[x][2]
 
         grid = np.linspace(lo, hi, _A_GRID + 2)[1:-1]
-        k = int(np.argmin([f(float(x)) for x in grid]))
-        if math.isfinite(f(float(grid[k]))):
-            lo = float(grid[k - 1]) if k > 0 else lo
-            hi = float(grid[k + 1]) if k + 1 < len(grid) else hi
-            g = (math.sqrt(5) - 1) / 2
-            x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-            for _ in range(_A_REFINE):
-                if f(x1) <= f(x2):
-                    hi, x2 = x2, x1
-                    x1 = hi - g * (hi - lo)
-                else:
-                    lo, x1 = x1, x2
-                    x2 = lo + g * (hi - lo)
+        search_log_contraction(f, grid, _A_REFINE, lo=lo, hi=hi)
         ok = [v for v in cache.values() if v[0].ok]
         if ok:
             best = min(ok, key=lambda v: v[2])

@@ -69,6 +69,7 @@ from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import _as_gains, check_gains, discrete_gains
 from ..validate import POLE_RADIUS, UDOT_MAX, real
 from .checks import continuous_equivalent, rho_interval
+from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction
 from .results import Margin
 
 __all__ = [
@@ -224,16 +225,6 @@ def _mismatch_bound(
     return np.minimum(amplitude, rate)
 
 
-def _jump_mismatch(model: BoucWenParams, tp: BoucWenParams, du: float) -> float:
-    """Bound of ``|Hm(x3) - Hv(x3)|`` for ``|x3| <= h_max`` and ``|du|`` (Gronwall; may be inf)."""
-    H = max(model.bounded_class().h_max, tp.bounded_class().h_max)
-    df = abs(model.alpha - tp.alpha) + (abs(model.beta - tp.beta) + abs(model.gamma - tp.gamma)) * H
-    if df == 0:
-        return 0.0
-    x = (abs(model.beta) + abs(model.gamma)) * du
-    return df * du * math.exp(x) if x < 700 else math.inf
-
-
 @dataclass(frozen=True)
 class _Problem:
     """Everything but the gain: channels (unscaled), rho ends, scaling, box bookkeeping."""
@@ -301,7 +292,7 @@ def _problem(
     du = udot_max * dt
     per = []
     for tp in [*vertices, *interior]:
-        dh = _jump_mismatch(params, tp, du)
+        dh = jump_mismatch(params, tp, du)
         per.append(np.concatenate([[dh], _mismatch_bound(params, tp, dt, u_lo, u_hi, du)]))
     per = np.array(per)
     nv = len(vertices)
@@ -347,43 +338,10 @@ def _check(Q: np.ndarray, lam: np.ndarray, a: float, blocks) -> list[Margin]:
     """Every LMI block with eigvalsh outside the solver (equilibrated by its diagonal)."""
     Q = (Q + Q.T) / 2
     margins = [Margin("Q > 0", -float(np.linalg.eigvalsh(Q).min()), 0.0)]
-    n, m = Q.shape[0], lam.size
     for idx, (A, B) in enumerate(blocks):
-        M = np.block(
-            [
-                [a * Q, np.zeros((n, m)), Q @ A.T],
-                [np.zeros((m, n)), (1 - a) * np.diag(lam), B.T],
-                [A @ Q, B, Q],
-            ]
-        )
-        M = (M + M.T) / 2
-        dg = np.sqrt(np.maximum(np.abs(np.diag(M)), 1e-300))
-        ev = float(np.linalg.eigvalsh(M / np.outer(dg, dg)).min())
+        ev = schur_min_eig(Q, lam, A, B, a)
         margins.append(Margin(f"Schur block rho end {idx} > 0", -ev, 0.0))
     return margins
-
-
-def _search(f, grid: list[float], iters: int = 5) -> None:
-    """Minimise ``f`` over ``x = log(1 - a)``: the grid, then golden section around its best.
-
-    The grid first, because a solver failure (``f = inf``) at a single point would
-    mislead a golden-section search started on the whole interval (observed: bounds
-    off by 4x at some boxes). ``f`` caches its own results.
-    """
-    vals = [f(x) for x in grid]
-    i = int(np.argmin(vals))
-    if not math.isfinite(vals[i]):
-        return
-    lo, hi = sorted((grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]))
-    g = (math.sqrt(5) - 1) / 2
-    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
-    for _ in range(iters):
-        if f(x1) <= f(x2):
-            hi, x2 = x2, x1
-            x1 = hi - g * (hi - lo)
-        else:
-            lo, x1 = x1, x2
-            x2 = lo + g * (hi - lo)
 
 
 def _not(
@@ -450,7 +408,7 @@ def _certify_K(pb: _Problem, K: np.ndarray, a: float | None) -> RobustObserverCe
             return cache[x][2]
 
         lo, hi = math.log(1e-6), math.log(1 - spec**2)
-        _search(f, list(np.linspace(hi, lo, 12)))
+        search_log_contraction(f, list(np.linspace(hi, lo, 12)), 5)
         ok = [v for v in cache.values() if v[0].ok]
         sol, av = min(ok, key=lambda v: v[2])[:2] if ok else (None, math.nan)
     else:
@@ -709,7 +667,7 @@ def synthesize_robust_observer(
             cache[x] = (sol, sol.objective if sol.ok else math.inf, 1 - math.exp(x))
         return cache[x][1]
 
-    _search(f, [math.log(1 - a) for a in _GRID])
+    search_log_contraction(f, [math.log(1 - a) for a in _GRID], 5)
     ok = [v for v in cache.values() if v[0].ok]
     if not ok:
         last = next(iter(cache.values()))[0]
