@@ -108,6 +108,7 @@ from ..control.controllers import TuningWarning, make_controller
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
+from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_disturbance_gains, check_gains, discrete_gains
@@ -286,7 +287,12 @@ def certify_robust(
     udot_max : float
         Input-rate envelope (V/s) the certificate assumes: ``|du| <= udot_max dt``.
     reference : Reference
-        The reference tracked (its terms are evaluated exactly over two periods).
+        The reference tracked. Its terms are covered at every time ``t >= 0`` (every
+        phase of a periodic reference; the whole of a settling one, up to
+        :attr:`~bwdesign.model.references.Reference.settles_at`), by
+        :func:`bwdesign.model.reference_cover.sup_abs`: an upper bound, not a window's
+        maximum. A reference that states neither a period nor a settling time, or not
+        its breakpoints and derivative bounds, is refused (``InputError``).
     lambda1, lambda2, integral_rate : float
         Discrete eq. (12) constants (1/s), as :func:`bwdesign.control.controllers.make_controller`.
     delay : bool
@@ -322,7 +328,8 @@ def certify_robust(
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError("uncertainty must be an UncertaintyBox")
     if not isinstance(reference, Reference):
-        raise InputError(f"reference must be a Sine, Triangle or Step, got {reference!r}")
+        raise InputError(f"reference must be a bwdesign Reference, got {reference!r}")
+    require_coverable(reference, dt)
     if observer not in ("phso", "phdo"):
         raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
     if observer == "phdo":
@@ -363,18 +370,30 @@ def certify_robust(
     # the PHDO's lumped error: rho = 1 in the loop, (rho - 1) e3 an input beside dh
     rhos = (rho_lo, rho_hi) if observer == "phso" else (1.0,)
 
-    # reference terms along two periods (or 1 s), exactly, per plant
-    period = reference.period or 1.0
-    nk = max(int(math.ceil(2 * period / dt)), 4)
-    xd, vd, ad = (np.asarray(v, float) for v in reference.evaluate(np.arange(nk + 1) * dt))
-    ff = Kr[0] * xd + Kr[1] * vd + Kr[2] * ad
-    uref = ff + Kx[0] * xd + Kx[1] * vd
-    R = np.column_stack([xd[:-1], vd[:-1], xd[1:], vd[1:], uref[:-1]])
+    # the reference terms as functionals of sigma(t) = (x_d, x_d', x_d'') at t, t + dt,
+    # t + 2 dt (model.reference_cover): R(t) = M sigma(t) = (x_d, x_d', x_d(t+dt),
+    # x_d'(t+dt), uref) and R at the next sample = M1 sigma(t); their supremum over every
+    # t >= 0 is bounded once for all plants below
+    kx, kd = Kr[0] + Kx[0], Kr[1] + Kx[1]
+    M = np.zeros((5, 9))
+    M[[0, 1, 2, 3], [0, 1, 3, 4]] = 1.0
+    M[4, :3] = (kx, kd, Kr[2])
+    M1 = np.roll(M, 3, axis=1)
+    M1[:, :3] = 0.0
+    dM = M1 - M
 
     n = lp.n
+    e = np.eye(n)
+    c_track = e[0]
+    c_est = (1 - lp.K[0]) * e[2]
+    c_x3 = e[4] - lp.K[2] * e[2]
+    # the applied input u_k = cu' z_k + su' s_k, for the bound on its steps
+    cu = np.array([_applied(lp, z, np.zeros(9)) for z in np.eye(n)])
+    su = np.array([_applied(lp, np.zeros(n), v) for v in np.eye(9)])
+    statics = (c_track, c_est, c_x3)
 
     def plant_data(tp):
-        """Per plant: its blocks (A, B~) per rho end, channel bounds and the static part."""
+        """Per plant: its blocks (A, B~) per rho end, channel bounds and the reference rows."""
         zt = discretize(tp, dt)
         Fv, gv = np.asarray(zt.F), np.asarray(zt.g)
         mats = [_matrices(lp, Fv, gv, r) for r in rhos]
@@ -384,21 +403,47 @@ def certify_robust(
             dh += (1 - rho_lo) * (params.bounded_class().h_max + hv)
         # quasi-static split (module doc): z = z~ + G^-1 w_slow, G = I - A(rho_c)
         G = np.eye(n) - np.mean([A for A, _ in mats], axis=0)
-        GiW = np.linalg.solve(G, (R @ Bref.T).T)  # (n, samples)
+        GiB = np.linalg.solve(G, Bref)  # w_slow's reference part: G^-1 Bref M sigma
         Gib = np.linalg.solve(G, bx3)
-        chan = np.abs(np.diff(GiW, axis=1)).max(axis=1)
+        rows = [GiB @ dM]  # the increments of the reference terms, per state
         if len(rhos) == 2:
             E = (mats[1][0] - mats[0][0]) / (rhos[1] - rhos[0])
-            chan = chan + (rhos[1] - rhos[0]) / 2 * (
-                np.abs(E @ GiW).max(axis=1) + np.abs(E @ Gib) * hv
-            )
+            rows.append(E @ GiB @ M)  # the rho coupling of the quasi-static part
+        rows += [np.array([c @ GiB @ M for c in statics])]
+        for A, _ in mats:  # the input steps' reference part, per rho end (input_step)
+            v = (A - np.eye(n)).T @ cu
+            rows.append(((v @ GiB + cu @ Bref) @ M + su[:5] @ dM)[None, :])
         blocks = [(A, np.column_stack([np.eye(n), B[:, 6] - Gib, B[:, 7:]])) for A, B in mats]
-        return blocks, chan, (hv, j, dh), (GiW, Gib, hv, mats, R @ Bref.T)
+        E_b = E if len(rhos) == 2 else None
+        return {
+            "blocks": blocks,
+            "hyst": (hv, j, dh),
+            "mats": mats,
+            "Gib": Gib,
+            "E": E_b,
+            "rows": np.vstack(rows),
+        }
 
     data_v = [plant_data(tp) for tp in vertices]
     data_i = [plant_data(tp) for tp in interior]
-    chan = np.max([d[1] for d in data_v + data_i], axis=0)
-    hb = np.max([d[2] for d in data_v + data_i], axis=0)
+    data = data_v + data_i
+    # sup over every t >= 0 of every reference row, all plants at once (refuses a
+    # reference it cannot cover: neither periodic nor settling, or no stated structure)
+    sups = sup_abs(reference, dt, np.vstack([d["rows"] for d in data]))
+    at = 0
+    for d in data:
+        m = len(d["rows"])
+        d["sup"], at = sups[at : at + m], at + m
+        hv = d["hyst"][0]
+        chan = d["sup"][:n].copy()
+        if d["E"] is not None:
+            chan += (rhos[1] - rhos[0]) / 2 * (d["sup"][n : 2 * n] + np.abs(d["E"] @ d["Gib"]) * hv)
+        d["chan"] = chan
+        k = 2 * n if d["E"] is not None else n
+        d["static"] = d["sup"][k : k + 3] + np.array([abs(c @ d["Gib"]) * hv for c in statics])
+        d["step_ref"] = d["sup"][k + 3 :]
+    chan = np.max([d["chan"] for d in data], axis=0)
+    hb = np.max([d["hyst"] for d in data], axis=0)
     W = np.concatenate([chan, [hb[1], hb[2], noise_max]])
     input_bounds = {
         "state_channels": chan.tolist(),
@@ -408,18 +453,15 @@ def certify_robust(
         "noise": noise_max,
     }
 
-    def static(c: np.ndarray) -> float:
-        """Largest quasi-static part ``|c' G^-1 w_slow|`` over the plants."""
-        return max(
-            float(np.abs(c @ GiW).max() + abs(c @ Gib) * hv)
-            for GiW, Gib, hv, _, _ in (d[3] for d in data_v + data_i)
-        )
+    def static(i: int) -> float:
+        """Largest quasi-static part ``|c' G^-1 w_slow|`` over the plants (``c = statics[i]``)."""
+        return max(float(d["static"][i]) for d in data)
 
     keep = W > 0
     Wk = W[keep]
     # state scaling: balance the nominal loop, then the square root of the diagonal of
     # its steady covariance under the normalised inputs, so that P is O(1)
-    (A_nom, B_nom), *_ = plant_data(params)[0]
+    (A_nom, B_nom), *_ = plant_data(params)["blocks"]
     _, (s, _) = matrix_balance(A_nom, permute=False, separate=True)
     s = np.asarray(s, float)
     if float(np.max(np.abs(np.linalg.eigvals(A_nom)))) < 1:
@@ -432,12 +474,8 @@ def certify_robust(
         Bs = B[:, keep] * Wk[None, :]
         return A * s[None, :] / s[:, None], Bs / s[:, None]
 
-    blocks_v = [scaled(A, B) for d in data_v for (A, B) in d[0]]
-    blocks_i = [scaled(A, B) for d in data_i for (A, B) in d[0]]
-    e = np.eye(n)
-    c_track = e[0]
-    c_est = (1 - lp.K[0]) * e[2]
-    c_x3 = e[4] - lp.K[2] * e[2]
+    blocks_v = [scaled(A, B) for d in data_v for (A, B) in d["blocks"]]
+    blocks_i = [scaled(A, B) for d in data_i for (A, B) in d["blocks"]]
     base = {
         "n_vertices": len(vertices),
         "n_interior": len(interior),
@@ -503,15 +541,10 @@ def certify_robust(
             cs = s * c
             return math.sqrt(max(gam, 0.0) * float(cs @ Q @ cs))
 
-        def peak(c):
-            return dyn(c) + static(c)
+        def peak(i):
+            return dyn(statics[i]) + static(i)
 
         return margins, peak, dyn
-
-    # the applied input u_k = cu' z_k + su' s_k, for the bound on its steps
-    cu = np.array([_applied(lp, z, np.zeros(9)) for z in np.eye(n)])
-    su = np.array([_applied(lp, np.zeros(n), v) for v in np.eye(9)])
-    dsu_R = np.diff(R @ su[:5])
 
     def input_step(dyn) -> float:
         """Bound on ``|u_{k+1} - u_k|`` in steady state, over every plant and rho end.
@@ -521,10 +554,10 @@ def certify_robust(
         """
         worst = 0.0
         j_, dh_ = float(hb[1]), float(hb[2])
-        for GiW, Gib, hv, mats, Wr in (d[3] for d in data_v + data_i):
-            for A, B in mats:
+        for d in data:
+            Gib, hv = d["Gib"], d["hyst"][0]
+            for (A, B), ref in zip(d["mats"], d["step_ref"], strict=True):
                 v = (A - np.eye(n)).T @ cu
-                ref = np.abs((v @ GiW + Wr @ cu)[:-1] + dsu_R).max()
                 total = (
                     dyn(v)
                     + float(ref)
@@ -582,16 +615,16 @@ def certify_robust(
     margins, peak, dyn = check(sol, av)
     holds = all(m.passed for m in margins)
     step = input_step(dyn) if holds else None
-    bounds = [peak(c_track), None, None]
+    bounds = [peak(0), None, None]
     # the estimation bounds: their own objective at the same contraction
-    for i, c in ((1, c_est), (2, c_x3)):
-        s2 = attempt(av, c)
+    for i in (1, 2):
+        s2 = attempt(av, statics[i])
         if s2.ok:
             m2, pk, _ = check(s2, av)
             if all(m.passed for m in m2):
-                bounds[i] = pk(c)
+                bounds[i] = pk(i)
         if bounds[i] is None and holds:
-            bounds[i] = peak(c)
+            bounds[i] = peak(i)
     if bounds[1] is not None:
         bounds[1] += abs(lp.K[0]) * noise_max
     if bounds[2] is not None:

@@ -17,6 +17,15 @@ length unit/s, length unit/s^2) from :meth:`evaluate`, plus ``x_d'''`` from
   with ``rise_time > 0`` a quintic (minimum-jerk) transition of that duration,
   so ``x_d'`` and ``x_d''`` are continuous: the smoothed reference that avoids
   observer peaking.
+
+Every reference also states its structure, so that a certificate can cover it
+at *every* time instead of a window: :attr:`~Reference.period` (periodic) or
+:attr:`~Reference.settles_at` (constant from then on), the times where it is
+not smooth (:meth:`~Reference.breakpoints`) and bounds on its derivatives
+between them (:meth:`~Reference.derivative_bounds`). A reference class of one's
+own that states neither a period nor a settling time, or does not implement the
+two methods, can be simulated but not certified
+(:func:`bwdesign.model.reference_cover.require_coverable`).
 """
 
 from __future__ import annotations
@@ -70,6 +79,30 @@ class Reference:
     def period(self) -> float | None:
         """Period (s) for periodic references, ``None`` otherwise."""
         return None
+
+    @property
+    def settles_at(self) -> float | None:
+        """Time (s) from which ``x_d`` is constant for ever (``x_d' = x_d'' = 0``).
+
+        ``None`` for a reference that never settles (a periodic one).
+        """
+        return None
+
+    def breakpoints(self, t0: float, t1: float) -> np.ndarray:
+        """Times in ``[t0, t1]`` where ``x_d``, ``x_d'`` or ``x_d''`` may jump or kink.
+
+        Between two consecutive breakpoints the reference is smooth and
+        :meth:`derivative_bounds` holds. A subclass implements it to be certified.
+        """
+        raise NotImplementedError
+
+    def derivative_bounds(self, t0: float, t1: float) -> tuple[float, float, float, float]:
+        """Upper bounds on the 1st to 4th derivatives of ``x_d`` over the open ``(t0, t1)``.
+
+        In that order; impulses at :meth:`breakpoints` are excluded (a jump is a
+        breakpoint, not a rate). A subclass implements it to be certified.
+        """
+        raise NotImplementedError
 
     def evaluate(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(x_d, x_d', x_d'')`` at times ``t`` (s)."""
@@ -133,6 +166,13 @@ class Sine(Reference):
     def jerk(self, t):
         w = 2 * math.pi * self.frequency
         return -self.amplitude * w**3 * np.cos(w * np.asarray(t, dtype=float) + self.phase)
+
+    def breakpoints(self, t0, t1):
+        return np.empty(0)
+
+    def derivative_bounds(self, t0, t1):
+        w, A = 2 * math.pi * self.frequency, abs(self.amplitude)
+        return (A * w, A * w**2, A * w**3, A * w**4)
 
     def to_dict(self):
         return {
@@ -228,6 +268,22 @@ class Triangle(Reference):
     def jerk(self, t):
         return np.zeros_like(np.asarray(t, dtype=float))
 
+    def breakpoints(self, t0, t1):
+        # corners every half period from a lower corner; blend edges half a blend either side
+        half = 0.5 / self.frequency
+        tc = (-0.5 * math.pi - self.phase) / (2 * math.pi * self.frequency)
+        n0 = math.floor((t0 - tc) / half) - 1
+        n1 = math.ceil((t1 - tc) / half) + 1
+        corners = tc + half * np.arange(n0, n1 + 1)
+        hc = 0.5 * self.corner_time
+        pts = np.concatenate([corners - hc, corners, corners + hc]) if hc else corners
+        return np.unique(pts[(pts >= t0) & (pts <= t1)])
+
+    def derivative_bounds(self, t0, t1):
+        v = 4.0 * abs(self.amplitude) * self.frequency
+        acc = 2.0 * v / self.corner_time if self.corner_time > 0 else 0.0
+        return (v, acc, 0.0, 0.0)
+
     def to_dict(self):
         return {
             "kind": "triangle",
@@ -282,6 +338,21 @@ class Step(Reference):
         vel = np.where(inside, (30 * s**2 - 60 * s**3 + 30 * s**4) / T, 0.0)
         acc = np.where(inside, (60 * s - 180 * s**2 + 120 * s**3) / T**2, 0.0)
         return self.offset + A * pos, A * vel, A * acc
+
+    @property
+    def settles_at(self) -> float:
+        return self.t_step + self.rise_time
+
+    def breakpoints(self, t0, t1):
+        pts = np.array(sorted({self.t_step, self.t_step + self.rise_time}))
+        return pts[(pts >= t0) & (pts <= t1)]
+
+    def derivative_bounds(self, t0, t1):
+        T, A = self.rise_time, abs(self.amplitude)
+        if T == 0 or t1 <= self.t_step or t0 >= self.t_step + T:
+            return (0.0, 0.0, 0.0, 0.0)
+        # the quintic's derivatives on [0, 1] peak at 15/8, 10/sqrt(3), 60 and 360
+        return (1.875 * A / T, 10 / math.sqrt(3) * A / T**2, 60.0 * A / T**3, 360.0 * A / T**4)
 
     def jerk(self, t):
         t = np.asarray(t, dtype=float)

@@ -191,21 +191,26 @@ def simulate_corners(
 ) -> BatchResult:
     """The sampled loop simulated at every corner of ``box``, started on the reference.
 
-    Three reference periods (0.5 s at least), statistics over the batch's steady
-    window; ``input_rate_max`` is what :func:`certified_envelope` compares with the
-    envelope a robust certificate assumes.
+    Three reference periods (0.5 s at least), or for a reference that settles (a
+    step) until 1 s after it has settled, so that every move of the reference is
+    simulated, as the certificate covers every one; statistics over the batch's
+    steady window; ``input_rate_max`` (over the whole run) is what
+    :func:`certified_envelope` compares with the envelope a robust certificate assumes.
     """
     ctrl = make_controller(
         params, lambda1, lambda2, form="discrete", dt=dt, integral_rate=integral_rate
     )
     start = start_on_reference(params, reference)
-    period = reference.period or 1.0
+    if reference.period is not None:
+        duration = max(3 * reference.period, 0.5)
+    else:
+        duration = max((reference.settles_at or 0.0) + 1.0, 1.0)
     return simulate_batch(
         params,
         reference,
         box.vertices(params),
         dt=dt,
-        duration=max(3 * period, 0.5),
+        duration=duration,
         controller=ctrl,
         observer=observer,
         gains=gains,
