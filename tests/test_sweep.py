@@ -25,7 +25,20 @@ from bwdesign.cli.main import main
 from bwdesign.errors import InputError, UnboundedModelError
 from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
 from bwdesign.sim.start import start_on_reference
-from bwdesign.sim.sweep import SweepError, SweepSpec, box_bounds, draw_scenarios, run_sweep
+from bwdesign.sim.sweep import (
+    MEMORY_CAP,
+    ROW_BYTES,
+    SweepError,
+    SweepSpec,
+    box_bounds,
+    check_samples,
+    check_scheduler,
+    check_workers,
+    draw_scenarios,
+    max_samples,
+    max_workers,
+    run_sweep,
+)
 
 DT = 2e-4
 P = preset("paper_experiment")
@@ -233,6 +246,41 @@ def test_bad_inputs(tune):
         box_bounds(P, {"zeta": ("rel", 0.1)})
 
 
+def test_limits_are_checked_before_any_work(tune, monkeypatch):
+    import os
+
+    import bwdesign.sim.sweep as sweep
+
+    cpus = os.cpu_count() or 1
+    assert max_workers() == 2 * cpus and check_workers(max_workers()) == max_workers()
+    with pytest.raises(InputError, match=f"at most {2 * cpus} worker processes"):
+        check_workers(max_workers() + 1)
+    for good in ("tcp://127.0.0.1:8786", "tls://sched.lab.example:8786", "host:1", "[::1]:8786"):
+        assert check_scheduler(good) == good
+    for bad in ("notaurl", "tcp://host", "tcp://host:0", "tcp://host:65536", "http://h:80", ""):
+        with pytest.raises(InputError, match="HOST:PORT"):
+            check_scheduler(bad)
+    limit = max_samples(2)
+    assert limit == max_samples(1) // 2  # floor(floor(x) / 2) = floor(x / 2)
+    assert max_samples(1) * ROW_BYTES <= MEMORY_CAP and check_samples(limit, 2) == limit
+    with pytest.raises(InputError, match=f"at most {limit} scenarios with 2 observer"):
+        check_samples(limit + 1, 2)
+    with pytest.raises(InputError, match="phso given 2 times"):
+        _spec(tune, ("phso", "eso", "phso"))
+
+    def no_work(*a, **k):
+        raise AssertionError("a chunk ran")
+
+    monkeypatch.setattr(sweep, "run_chunk", no_work)
+    sc = draw_scenarios(P, {}, 2)
+    for kw, match in (
+        ({"workers": max_workers() + 1}, "worker processes"),
+        ({"scheduler": "notaurl"}, "HOST:PORT"),
+    ):
+        with pytest.raises(InputError, match=match):
+            run_sweep(_spec(tune), sc, **kw)
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [
@@ -243,6 +291,11 @@ def test_bad_inputs(tune):
         (["--samples", "3"], r"no \[uncertainty\] section"),
         (["--samples", "3", "--uncertainty", "a1=2%", "--seed", "-1"], "integer >= 0"),
         (["--samples", "3", "--uncertainty", "a1=2%", "--observers", "ukf"], "sweep observers"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--observers", "phso,PHSO"], "once"),
+        (["--samples", "3", "--uncertainty", "a1=2%,a1=3%"], "a1 given twice"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--workers", "1000"], "at most"),
+        (["--samples", "100000000", "--uncertainty", "a1=2%"], r"at most \d+ scenarios"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--scheduler", "notaurl"], "HOST:PORT"),
     ],
 )
 def test_cli_bad_input(tmp_path, capsys, argv, message):
@@ -340,6 +393,8 @@ def test_report_includes_the_configs_sweep(tmp_path, capsys):
         (("samples = 100", "samples = 0"), r"\[sweep\] samples must be an integer > 0"),
         (("samples = 100", 'samples = 100\ntuning = "fast"'), r"\[sweep\] tuning must be one of"),
         (("samples = 100", 'samples = 100\nobservers = ["ukf"]'), r"\[sweep\] observers"),
+        (("samples = 100", 'samples = 100\nobservers = ["eso", "eso"]'), r"given once"),
+        (("samples = 100", "samples = 100000000"), r"\[sweep\] samples: .* at most \d+"),
     ],
 )
 def test_report_sweep_bad_input(tmp_path, capsys, edit, message):

@@ -11,6 +11,9 @@
   and then reported (:class:`SweepError`), never dropped. The rows are put back in
   scenario order, so the result is the same for any chunking and any number of
   workers.
+- The limits are checked before any work: :func:`check_samples` (memory),
+  :func:`check_workers` (local cluster size), :func:`check_scheduler` (address
+  form) and :func:`check_observers` (each observer once).
 
 This module is the only one that imports dask (inside functions).
 """
@@ -20,6 +23,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from statistics import NormalDist
@@ -33,6 +37,7 @@ from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from ..observers.gains import disturbance_gains_from
+from ..validate import Range, integer
 from .batch import BATCH_OBSERVERS, simulate_batch
 from .start import start_on_reference
 
@@ -47,11 +52,34 @@ __all__ = [
     "check_box",
     "spec_from_config",
     "bounds_from_config",
+    "check_samples",
+    "check_workers",
+    "check_scheduler",
+    "check_observers",
+    "max_samples",
+    "max_workers",
+    "WORKERS_PER_CPU",
+    "ROW_BYTES",
+    "MEMORY_CAP",
 ]
 
 DISTRIBUTIONS = ("uniform", "normal")
 #: Result columns per (scenario, observer) row, after the drawn ones.
 METRIC_COLUMNS = ("maxe", "me", "rmse", "est_rmse_x1", "est_rmse_x2", "est_rmse_x3")
+#: Local Dask worker processes per CPU at most: the chunks are CPU-bound, so more
+#: processes only queue on the same cores (and each costs ~100 MB and a start-up).
+WORKERS_PER_CPU = 2
+#: Peak memory per (scenario, observer) row of a sweep, in bytes: the growth of the
+#: peak resident size of ``bwdesign sweep`` (two observers, --workers 0) from 50 000 to
+#: 200 000 scenarios, 433 bytes per row (drawn columns, chunk results, the ordered
+#: table, the Parquet copy), rounded up.
+ROW_BYTES = 440
+#: A sweep plans for at most half the machine's memory and never more than this.
+MEMORY_CAP = 8 * 2**30
+_ADDRESS = re.compile(
+    r"(?:(?P<scheme>tcp|tls)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?)"
+    r":(?P<port>[0-9]{1,5})/?"
+)
 
 
 class SweepError(BWDesignError, RuntimeError):
@@ -101,11 +129,123 @@ class SweepSpec:
     def __post_init__(self) -> None:
         if self.start not in ("reference", "rest"):
             raise InputError(f"start must be 'reference' or 'rest', got {self.start!r}")
-        bad = [o for o in self.observers if o not in BATCH_OBSERVERS]
-        if not self.observers or bad:
-            raise InputError(
-                f"sweep observers must be among {', '.join(BATCH_OBSERVERS)}, got {self.observers}"
-            )
+        check_observers(self.observers)
+
+
+def check_observers(observers: Sequence[str]) -> tuple[str, ...]:
+    """``observers`` as a tuple: each among :data:`BATCH_OBSERVERS`, each once.
+
+    Raises
+    ------
+    InputError
+        None given, an unknown name, or a name given twice (it would count every
+        scenario twice).
+    """
+    obs = tuple(observers)
+    bad = [o for o in obs if o not in BATCH_OBSERVERS]
+    if not obs or bad:
+        raise InputError(f"sweep observers must be among {', '.join(BATCH_OBSERVERS)}, got {obs}")
+    twice = sorted({o for o in obs if obs.count(o) > 1})
+    if twice:
+        raise InputError(
+            f"sweep observers must each be given once: {', '.join(twice)} given "
+            f"{max(obs.count(o) for o in twice)} times (every scenario would count twice)"
+        )
+    return obs
+
+
+def max_workers() -> int:
+    """Most local worker processes a sweep starts: :data:`WORKERS_PER_CPU` per CPU."""
+    return WORKERS_PER_CPU * (os.cpu_count() or 1)
+
+
+def check_workers(workers: Any) -> int | None:
+    """``workers`` (None, 0 or a local cluster's size) after checking it fits this machine.
+
+    Raises
+    ------
+    InputError
+        Not an integer >= 0, or more than :func:`max_workers`.
+    """
+    if workers is None:
+        return None
+    n = integer(workers, "workers", within=Range(0, math.inf))
+    limit = max_workers()
+    if n > limit:
+        raise InputError(
+            f"workers = {n} is more than a local cluster can run here: at most {limit} worker "
+            f"processes ({WORKERS_PER_CPU} per CPU, {os.cpu_count() or 1} CPU(s)); "
+            "a larger cluster runs elsewhere (--scheduler)"
+        )
+    return n
+
+
+def check_scheduler(address: Any) -> str | None:
+    """``address`` of a dask scheduler after checking its form ``[tcp|tls://]HOST:PORT``.
+
+    Raises
+    ------
+    InputError
+        Not a string of that form, or a port outside 1..65535.
+    """
+    if address is None:
+        return None
+    m = _ADDRESS.fullmatch(address.strip()) if isinstance(address, str) else None
+    if m is None or not 1 <= int(m["port"]) <= 65535:
+        raise InputError(
+            f"scheduler address {address!r} is not of the form tcp://HOST:PORT "
+            "(or tls://HOST:PORT, or HOST:PORT; PORT in 1..65535)"
+        )
+    return address.strip()
+
+
+def _memory() -> tuple[int, str]:
+    """Bytes a sweep may plan for, and why."""
+    try:
+        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        total = 0
+    cap = f"{MEMORY_CAP / 2**30:g} GiB"
+    if total <= 0:
+        return MEMORY_CAP, f"this machine's memory is unknown: the cap of {cap}"
+    half = f"half of this machine's {total / 2**30:.3g} GiB"
+    if total // 2 < MEMORY_CAP:
+        return total // 2, half
+    return MEMORY_CAP, f"{half}, capped at {cap}"
+
+
+def max_samples(n_observers: int = 1) -> int:
+    """Most scenarios one sweep holds with ``n_observers`` observers.
+
+    The memory a sweep plans for (half the machine's, at most :data:`MEMORY_CAP`)
+    over :data:`ROW_BYTES` per (scenario, observer) row.
+    """
+    k = integer(n_observers, "number of observers", within=Range(1, math.inf))
+    return _memory()[0] // (ROW_BYTES * k)
+
+
+def check_samples(n: Any, n_observers: int = 1) -> int:
+    """``n`` scenarios after checking they fit in memory with ``n_observers`` observers.
+
+    Raises
+    ------
+    InputError
+        Not an integer > 0, or more than :func:`max_samples`.
+    """
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n <= 0:
+        raise InputError(f"the number of samples must be an integer > 0, got {n!r}")
+    n = int(n)
+    limit = max_samples(n_observers)
+    if n > limit:
+        budget, why = _memory()
+        need = n * n_observers * ROW_BYTES
+        raise InputError(
+            f"{n} scenarios x {n_observers} observer(s) need about {need / 2**30:.3g} GiB "
+            f"({ROW_BYTES} bytes per row); a sweep plans for at most {budget / 2**30:.3g} GiB "
+            f"({why}): at most {limit} scenarios with {n_observers} observer(s). "
+            "Run a larger study as several sweeps with different seeds"
+        )
+    return n
 
 
 def box_bounds(
@@ -180,8 +320,7 @@ def draw_scenarios(
     (sigma = half-width / z), truncated to the box (inverse-CDF sampling, so one
     uniform number per parameter and scenario as for ``uniform``).
     """
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n <= 0:
-        raise InputError(f"the number of samples must be an integer > 0, got {n!r}")
+    check_samples(n)
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise InputError(f"seed must be an integer >= 0, got {seed!r}")
     if distribution not in DISTRIBUTIONS:
@@ -289,9 +428,10 @@ def run_sweep(
         Scenarios per task.
     workers : int, optional
         ``0``: in this process, no Dask. ``K >= 1``: a LocalCluster of ``K``
-        worker processes (default: the number of CPUs). Ignored with ``scheduler``.
+        worker processes (default: the number of CPUs; at most :func:`max_workers`).
+        Ignored with ``scheduler``.
     scheduler : str, optional
-        Address of a running ``dask.distributed`` scheduler.
+        Address of a running ``dask.distributed`` scheduler (``tcp://HOST:PORT``).
     retries : int
         Retries of a failed chunk before the sweep fails.
     timeout : float
@@ -301,16 +441,17 @@ def run_sweep(
 
     Raises
     ------
+    InputError
+        More scenarios than :func:`max_samples`, more workers than :func:`max_workers`,
+        a malformed scheduler address, a bad chunk size.
     SweepError
         A chunk failed after its retries, or the scheduler did not answer.
     """
-    n = len(scenarios["scenario"])
+    n = check_samples(len(scenarios["scenario"]), len(spec.observers))
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size <= 0:
         raise InputError(f"chunk_size must be an integer > 0, got {chunk_size!r}")
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, int) or workers < 0
-    ):
-        raise InputError(f"workers must be an integer >= 0, got {workers!r}")
+    workers = check_workers(workers)
+    scheduler = check_scheduler(scheduler)
     slices = _chunks(n, chunk_size)
     pieces = [{k: np.asarray(v)[s] for k, v in scenarios.items()} for s in slices]
     total = len(pieces)
