@@ -18,7 +18,6 @@ from ..model.params import MODEL_FIELDS
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from ..sim.sweep import (
-    METRIC_COLUMNS,
     WORKERS_PER_CPU,
     SweepError,
     SweepSpec,
@@ -220,6 +219,25 @@ def _progress(quiet: bool):
     return update, bar
 
 
+def _envelope_text(spec: SweepSpec, s: dict) -> str:
+    """``; 12 outside the envelope |u'| <= 397 V/s (up to 8.7x); worst replay differs ...``."""
+    iu = spec.params.input_unit
+    text = ""
+    if s["outside_envelope"] is not None:
+        text = f"; {s['outside_envelope']} outside the envelope |u'| <= {spec.udot_max:.4g} {iu}/s"
+        if s["outside_envelope"]:
+            text += f" (up to {s['worst_envelope_ratio']:.3g}x)"
+    rep = s.get("replay")
+    if rep and rep["sensitive"]:
+        d = rep["replay_difference"]
+        diff = "diverges differently" if math.isinf(d) else f"differs by {100 * d:.2g} %"
+        text += (
+            f"; worst row sensitive to rounding (its replay {diff}): "
+            "rows like it reproduce only statistically"
+        )
+    return text
+
+
 def run_sweep_command(args: argparse.Namespace) -> int:
     from ..report.sweep import write_sweep
 
@@ -260,15 +278,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
                     "out_dir": str(args.out),
                     "summary": summary,
                     "bounds": bounds,
-                    "columns": [
-                        "scenario",
-                        *MODEL_FIELDS,
-                        "noise_seed",
-                        "observer",
-                        *METRIC_COLUMNS,
-                        "stable",
-                        "status",
-                    ],
+                    "columns": list(table),
                 }
             )
         )
@@ -282,7 +292,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         )
         print(
             f"{obs.upper()}: {s['scenarios']} scenarios, {s['unstable']} unstable; {med} "
-            f"{spec.params.length_unit}"
+            f"{spec.params.length_unit}{_envelope_text(spec, s)}"
         )
     print(f"{args.out}/scenarios.parquet, {args.out}/report.md")
     return EXIT_OK

@@ -11,6 +11,10 @@
   and then reported (:class:`SweepError`), never dropped. The rows are put back in
   scenario order, so the result is the same for any chunking and any number of
   workers.
+- Every row records the largest input rate ``input_rate_max`` over the metrics
+  window and, when the spec names the envelope its certificate assumed
+  (``SweepSpec.udot_max``), whether it stayed inside (``within_envelope``).
+  A certificate says nothing about a row outside it.
 - The limits are checked before any work: :func:`check_samples` (memory),
   :func:`check_workers` (local cluster size), :func:`check_scheduler` (address
   form) and :func:`check_observers` (each observer once).
@@ -37,7 +41,7 @@ from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from ..observers.gains import disturbance_gains_from
-from ..validate import Range, integer
+from ..validate import UDOT_MAX, Range, integer, real
 from .batch import BATCH_OBSERVERS, simulate_batch
 from .start import start_on_reference
 
@@ -65,7 +69,15 @@ __all__ = [
 
 DISTRIBUTIONS = ("uniform", "normal")
 #: Result columns per (scenario, observer) row, after the drawn ones.
-METRIC_COLUMNS = ("maxe", "me", "rmse", "est_rmse_x1", "est_rmse_x2", "est_rmse_x3")
+METRIC_COLUMNS = (
+    "maxe",
+    "me",
+    "rmse",
+    "est_rmse_x1",
+    "est_rmse_x2",
+    "est_rmse_x3",
+    "input_rate_max",
+)
 #: Local Dask worker processes per CPU at most: the chunks are CPU-bound, so more
 #: processes only queue on the same cores (and each costs ~100 MB and a start-up).
 WORKERS_PER_CPU = 2
@@ -109,6 +121,12 @@ class SweepSpec:
     start : {"reference", "rest"}
         Every scenario starts on the reference (:func:`bwdesign.start_on_reference`,
         as the report's runs) or from rest.
+    udot_max : float, optional
+        The input-rate envelope |u'| <= udot_max (input unit/s) the loop's certificate
+        assumed; each row then says whether its input stayed inside
+        (``within_envelope``). None: rates are recorded, not compared.
+    envelope_source : str
+        Where ``udot_max`` comes from, for reports.
     """
 
     params: BoucWenParams
@@ -121,6 +139,8 @@ class SweepSpec:
     noise_std: float = 0.0
     delay: bool = False
     start: str = "reference"
+    udot_max: float | None = None
+    envelope_source: str = ""
 
     def gains_for(self, observer: str) -> tuple[float, ...]:
         """The continuous gains ``observer`` runs: ``gains``; ``(l1, l2, 0, l3)`` for the PHDO."""
@@ -130,6 +150,8 @@ class SweepSpec:
         if self.start not in ("reference", "rest"):
             raise InputError(f"start must be 'reference' or 'rest', got {self.start!r}")
         check_observers(self.observers)
+        if self.udot_max is not None:
+            real(self.udot_max, "udot_max (input unit/s)", within=UDOT_MAX)
 
 
 def check_observers(observers: Sequence[str]) -> tuple[str, ...]:
@@ -363,7 +385,13 @@ def _true_params(params: BoucWenParams, cols: Mapping[str, np.ndarray]) -> list[
 
 
 def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Run one chunk of scenarios for every observer of ``spec``: one row per pair."""
+    """Run one chunk of scenarios for every observer of ``spec``: one row per pair.
+
+    Columns: the drawn ones, ``observer``, :data:`METRIC_COLUMNS` (metrics over the
+    steady-state window; ``input_rate_max`` is the largest ``|u_k - u_(k-1)| / dt``
+    there), ``stable``, ``within_envelope`` (stable with ``input_rate_max <=
+    spec.udot_max``; only when the spec names an envelope) and ``status``.
+    """
     tps = _true_params(spec.params, cols)
     init = start_on_reference(spec.params, spec.reference) if spec.start == "reference" else {}
     out: dict[str, list[np.ndarray]] = {}
@@ -388,7 +416,11 @@ def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.n
         part.update(maxe=res.maxe, me=res.me, rmse=res.rmse)
         for i in range(3):
             part[f"est_rmse_x{i + 1}"] = res.estimation_rmse[:, i]
+        part["input_rate_max"] = res.input_rate_max
         part["stable"] = res.stable
+        if spec.udot_max is not None:
+            with np.errstate(invalid="ignore"):
+                part["within_envelope"] = res.stable & (res.input_rate_max <= spec.udot_max)
         part["status"] = np.array(res.status, dtype=object)
         for k, v in part.items():
             out.setdefault(k, []).append(v)
@@ -553,7 +585,9 @@ def spec_from_config(
     """The sweep of a stage's loop: ``tuning="config"`` runs the ``[observer]`` gains and
     ``[controller]`` constants (eq. 12 in ``form``), ``"digital"`` the digital tuning
     (:func:`bwdesign.digital_tuning`); ``[controller]`` limits apply in both. ``duration``
-    defaults to three reference periods, at least 1 s.
+    defaults to three reference periods, at least 1 s. ``udot_max`` is the stage's
+    ``[envelope]`` (the one its certificates assume), else the envelope the reference
+    itself needs (:func:`bwdesign.derive_envelope`, margin 1).
     """
     from ..control.controllers import make_controller
     from ..control.tuning import digital_tuning
@@ -597,6 +631,7 @@ def spec_from_config(
         )
     period = config.reference.period
     duration = duration or max(1.0, 3 * period if period else 1.0)
+    udot_max, source = _stage_envelope(config)
     return SweepSpec(
         params=params,
         reference=config.reference,
@@ -608,7 +643,28 @@ def spec_from_config(
         noise_std=noise_std,
         delay=delay,
         start=start,
+        udot_max=udot_max,
+        envelope_source=source,
     )
+
+
+def _stage_envelope(config: Any) -> tuple[float | None, str]:
+    """The envelope the stage's certificates assume: ``[envelope]``, else the reference's own."""
+    from ..model.envelope import derive_envelope
+
+    if config.envelope_spec is not None:
+        env = config.envelope()
+        how = (
+            "stated in [envelope]"
+            if env.source == "given"
+            else f"[envelope]: derived from [reference], margin {env.margin:g}"
+        )
+        return env.udot_max, how
+    try:
+        env = derive_envelope(config.plant, config.reference)
+    except InputError as err:  # a sharp step has no finite rate: nothing to compare with
+        return None, f"none (no [envelope], and {err})"
+    return env.udot_max, "derived from [reference] (no [envelope] in the stage; margin 1)"
 
 
 def bounds_from_config(config: Any) -> dict[str, tuple[float, float]]:
