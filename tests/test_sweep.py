@@ -305,6 +305,9 @@ def test_a_scheduler_that_does_not_answer_times_out(tune):
     sc = draw_scenarios(P, {}, 2, seed=0)
     with pytest.raises(SweepError, match="no Dask scheduler answered"):
         run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tcp://127.0.0.1:{port}", timeout=2)
+    # a well-formed tls:// address without a TLS configuration: said, not a TypeError
+    with pytest.raises(SweepError, match="could not connect .* TLS"):
+        run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tls://127.0.0.1:{port}", timeout=2)
 
 
 def test_a_failing_chunk_is_reported_not_dropped(tune, monkeypatch):

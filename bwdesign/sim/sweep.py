@@ -528,6 +528,11 @@ def _run_dask(spec, pieces, slices, workers, scheduler, retries, timeout, progre
                 raise SweepError(
                     f"no Dask scheduler answered at {scheduler!r} within {timeout:g} s ({err})"
                 ) from None
+            except (TypeError, ValueError) as err:  # e.g. tls:// without a TLS configuration
+                raise SweepError(
+                    f"could not connect to the Dask scheduler at {scheduler!r} "
+                    f"({type(err).__name__}: {err})"
+                ) from None
         else:
             try:
                 cluster = LocalCluster(
