@@ -116,6 +116,18 @@ def _plant(old: str, new: str, extra: str = "") -> Callable[[Path], None]:
     return _stage(PLANT.replace(old, new) + extra)
 
 
+SWEEP = [
+    "sweep",
+    "--config",
+    "stage.toml",
+    "--out",
+    "sw",
+    "--uncertainty",
+    "a1=2%",
+    "--samples",
+    "3",
+]
+SWEPT = GOOD_TOML + "[uncertainty]\na1 = { rel = 0.02 }\n\n[sweep]\nsamples = 4\n"
 STAGE = ["--plant", "stage.toml"]
 CERT_STAGE = ["certify", *STAGE, *GAINS, "--udot-max", "361"]
 ENV = "from_reference = true\nmargin = 1.1"
@@ -240,6 +252,29 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         "gains[0] must be a number",
     ),  # fmt: skip
     ("unknown subcommand", ["frobnicate"], None, "invalid choice"),
+    # -- sweep limits (each refused before any work) ---------------------------
+    ("sweep --workers 1000", [*SWEEP, "--workers", "1000"], _good, "at most"),
+    ("sweep --samples 100000000", [*SWEEP[:-1], "100000000"], _good, "scenarios with 2"),
+    ("sweep --scheduler notaurl", [*SWEEP, "--scheduler", "notaurl"], _good, "tcp://HOST:PORT"),
+    ("sweep --observers phso,phso", [*SWEEP, "--observers", "phso,phso"], _good, "once"),
+    (
+        "sweep --uncertainty a1 twice",
+        [*SWEEP[:-3], "a1=2%,a1=3%", *SWEEP[-2:]],
+        _good,
+        "a1 given twice",
+    ),  # fmt: skip
+    (
+        "report [sweep] observers twice",
+        REPORT,
+        _stage(SWEPT + 'observers = ["eso", "eso"]\n'),
+        "once",
+    ),
+    (
+        "report [sweep] samples 1e8",
+        REPORT,
+        _stage(SWEPT.replace("samples = 4", "samples = 100000000")),
+        "at most",
+    ),
 ]
 
 

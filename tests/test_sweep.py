@@ -23,9 +23,27 @@ from bwdesign import (
 )
 from bwdesign.cli.main import main
 from bwdesign.errors import InputError, UnboundedModelError
+from bwdesign.model.config import load_config
+from bwdesign.model.envelope import derive_envelope
+from bwdesign.report.sweep import sweep_summary
 from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
+from bwdesign.sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, replay_row
 from bwdesign.sim.start import start_on_reference
-from bwdesign.sim.sweep import SweepError, SweepSpec, box_bounds, draw_scenarios, run_sweep
+from bwdesign.sim.sweep import (
+    MEMORY_CAP,
+    ROW_BYTES,
+    SweepError,
+    SweepSpec,
+    box_bounds,
+    check_samples,
+    check_scheduler,
+    check_workers,
+    draw_scenarios,
+    max_samples,
+    max_workers,
+    run_sweep,
+    spec_from_config,
+)
 
 DT = 2e-4
 P = preset("paper_experiment")
@@ -118,6 +136,29 @@ def test_batch_matches_simulate(tune, observer, label, kw):
         np.testing.assert_allclose(got, want, rtol=1e-9)
 
 
+def test_the_agreement_scenarios_are_not_sensitive_to_rounding(tune):
+    """test_batch_matches_simulate asks for 1e-9: its scenarios must not be chaotic.
+
+    A change of a1 in its 12th digit moves their metrics by ~1e-9 (an amplification
+    of ~1e3; a chaotic loop moves them by 1e-5 .. 1e-2), so the rounding differences
+    between the batched and the scalar loop (~1e-16) stay near 1e-13, far below the
+    tolerance: a pass or a failure there is about the loop, not about chaos.
+    """
+    tps, cols = _mismatched(5, seed=2)
+    ref = Triangle(amplitude=60, offset=80, frequency=2, corner_time=0.02)
+    ctl = DiscreteTrackingController(
+        P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate, u_limits=(0, 100)
+    )
+    kw = dict(dt=DT, duration=1.0, controller=ctl, gains=tune.observer_gains_for("phso"))
+    kw |= dict(noise_std=0.02, seeds=cols["noise_seed"])
+    a = simulate_batch(P, ref, tps, **kw)
+    b = simulate_batch(P, ref, [replace(t, a1=t.a1 * (1 + SENSITIVITY_STEP)) for t in tps], **kw)
+    assert a.stable.all()
+    for m in ("me", "maxe"):
+        change = np.abs(getattr(b, m) / getattr(a, m) - 1)
+        assert change.max() < SENSITIVE_RTOL, (m, change)
+
+
 def test_batch_detects_divergence_per_scenario():
     """An eq. 12 loop with the paper's constants and a 3x a3 error diverges; the rest does not."""
     tps = [P, replace(P, a3=3 * P.a3), replace(P, a1=1.01 * P.a1)]
@@ -163,6 +204,69 @@ def _spec(tune, observers=("phso", "eso")):
     )
 
 
+#: The digital tuning's PHSO loop on a 2 Hz sine, 1.5 s: at the nominal plant its input
+#: stays inside the envelope and the loop is not sensitive to rounding; at the corner
+#: a1 + 2 %, a3 - 2 % (measured) its input chatters at ~7x the envelope and a change of a1
+#: in its 12th digit moves MAXE by ~1e-2: chaotic.
+CHAOS_REF = Sine(amplitude=80, offset=100, frequency=2)
+
+
+@pytest.fixture(scope="module")
+def corner_sweep(tune):
+    ctl = DiscreteTrackingController(
+        P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
+    )
+    env = derive_envelope(P, CHAOS_REF, margin=1.1).udot_max
+    spec = SweepSpec(
+        params=P,
+        reference=CHAOS_REF,
+        dt=DT,
+        duration=1.5,
+        controller=ctl,
+        gains=tuple(tune.gains),
+        observers=("phso",),
+        udot_max=env,
+        envelope_source="the reference's, margin 1.1",
+    )
+    sc = draw_scenarios(P, {}, 2, seed=0)  # scenario 0 nominal, scenario 1 the corner
+    sc["a1"][1], sc["a3"][1] = 1.02 * P.a1, 0.98 * P.a3
+    return spec, run_sweep(spec, sc, workers=0)
+
+
+def test_rows_say_whether_the_input_stayed_in_the_envelope(corner_sweep):
+    spec, table = corner_sweep
+    rate = table["input_rate_max"]
+    assert table["within_envelope"].tolist() == [True, False]
+    assert rate[0] <= spec.udot_max < 5 * spec.udot_max < rate[1]
+    s = sweep_summary(table, udot_max=spec.udot_max)["phso"]
+    assert (s["outside_envelope"], s["fraction_outside_envelope"]) == (1, 0.5)
+    assert s["worst_envelope_ratio"] == pytest.approx(rate[1] / spec.udot_max, rel=1e-15)
+    assert s["input_rate_max"] == {"max": rate[1], "worst_scenario": 1}
+    # the column is the scalar loop's max |u_k - u_(k-1)| / dt over the window (nominal row)
+    rep = replay_row(spec, table, 0, "phso")
+    assert rep.replayed["input_rate_max"] == pytest.approx(rate[0], rel=1e-9)
+    # no envelope named: rates recorded, nothing compared
+    bare = replace(spec, udot_max=None, duration=1.0)
+    bare = run_sweep(bare, draw_scenarios(P, {}, 1), workers=0)
+    assert "within_envelope" not in bare and 0 < bare["input_rate_max"][0] < np.inf
+    assert sweep_summary(bare)["phso"]["outside_envelope"] is None
+
+
+def test_a_replay_says_whether_its_row_reproduces(corner_sweep):
+    """The report's replay: the nominal row reproduces, the chaotic corner only statistically."""
+    spec, table = corner_sweep
+    calm = replay_row(spec, table, 0, "phso")
+    assert calm.sensitive is False
+    assert calm.replay_difference < 1e-9 and calm.perturbation_change < 1e-9
+    assert calm.replayed["maxe"] == pytest.approx(table["maxe"][0], rel=1e-9)
+    wild = replay_row(spec, table, 1, "phso")
+    assert wild.sensitive is True
+    assert wild.perturbation_change > SENSITIVE_RTOL
+    assert wild.to_dict()["row"]["maxe"] == table["maxe"][1]
+    with pytest.raises(InputError, match="no row for scenario 7"):
+        replay_row(spec, table, 7, "phso")
+
+
 def _equal(a, b):
     assert a.keys() == b.keys()
     for k in a:
@@ -201,6 +305,9 @@ def test_a_scheduler_that_does_not_answer_times_out(tune):
     sc = draw_scenarios(P, {}, 2, seed=0)
     with pytest.raises(SweepError, match="no Dask scheduler answered"):
         run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tcp://127.0.0.1:{port}", timeout=2)
+    # a well-formed tls:// address without a TLS configuration: said, not a TypeError
+    with pytest.raises(SweepError, match="could not connect .* TLS"):
+        run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tls://127.0.0.1:{port}", timeout=2)
 
 
 def test_a_failing_chunk_is_reported_not_dropped(tune, monkeypatch):
@@ -233,6 +340,56 @@ def test_bad_inputs(tune):
         box_bounds(P, {"zeta": ("rel", 0.1)})
 
 
+def test_a_stage_sweep_compares_with_the_stages_envelope(tmp_path):
+    """[envelope] when the stage has one (the certificates' assumption), else the reference's."""
+    config = load_config("configs/paper_experiment.toml")
+    spec = spec_from_config(config)
+    assert spec.udot_max == config.envelope().udot_max and "margin 1.1" in spec.envelope_source
+    text = Path("configs/paper_experiment.toml").read_text()
+    start, end = text.index("[envelope]"), text.index("[requirements]")
+    (tmp_path / "s.toml").write_text(text[:start] + text[end:])
+    bare = spec_from_config(load_config(tmp_path / "s.toml"))
+    assert bare.udot_max == derive_envelope(P, config.reference).udot_max
+    assert "no [envelope]" in bare.envelope_source
+
+
+def test_limits_are_checked_before_any_work(tune, monkeypatch):
+    import os
+
+    import bwdesign.sim.sweep as sweep
+
+    cpus = os.cpu_count() or 1
+    assert max_workers() == 2 * cpus and check_workers(max_workers()) == max_workers()
+    with pytest.raises(InputError, match=f"at most {2 * cpus} worker processes"):
+        check_workers(max_workers() + 1)
+    for good in ("tcp://127.0.0.1:8786", "tls://sched.lab.example:8786", "host:1", "[::1]:8786"):
+        assert check_scheduler(good) == good
+    for bad in ("notaurl", "tcp://host", "tcp://host:0", "tcp://host:65536", "http://h:80", ""):
+        with pytest.raises(InputError, match="HOST:PORT"):
+            check_scheduler(bad)
+    limit = max_samples(2)
+    assert limit == max_samples(1) // 2  # floor(floor(x) / 2) = floor(x / 2)
+    assert max_samples(1) * ROW_BYTES <= MEMORY_CAP and check_samples(limit, 2) == limit
+    with pytest.raises(InputError, match=f"at most {limit} scenarios with 2 observer"):
+        check_samples(limit + 1, 2)
+    with pytest.raises(InputError, match="phso given 2 times"):
+        _spec(tune, ("phso", "eso", "phso"))
+    with pytest.raises(InputError, match="udot_max"):
+        replace(_spec(tune), udot_max=-1.0)
+
+    def no_work(*a, **k):
+        raise AssertionError("a chunk ran")
+
+    monkeypatch.setattr(sweep, "run_chunk", no_work)
+    sc = draw_scenarios(P, {}, 2)
+    for kw, match in (
+        ({"workers": max_workers() + 1}, "worker processes"),
+        ({"scheduler": "notaurl"}, "HOST:PORT"),
+    ):
+        with pytest.raises(InputError, match=match):
+            run_sweep(_spec(tune), sc, **kw)
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [
@@ -243,6 +400,11 @@ def test_bad_inputs(tune):
         (["--samples", "3"], r"no \[uncertainty\] section"),
         (["--samples", "3", "--uncertainty", "a1=2%", "--seed", "-1"], "integer >= 0"),
         (["--samples", "3", "--uncertainty", "a1=2%", "--observers", "ukf"], "sweep observers"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--observers", "phso,PHSO"], "once"),
+        (["--samples", "3", "--uncertainty", "a1=2%,a1=3%"], "a1 given twice"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--workers", "1000"], "at most"),
+        (["--samples", "100000000", "--uncertainty", "a1=2%"], r"at most \d+ scenarios"),
+        (["--samples", "3", "--uncertainty", "a1=2%", "--scheduler", "notaurl"], "HOST:PORT"),
     ],
 )
 def test_cli_bad_input(tmp_path, capsys, argv, message):
@@ -286,6 +448,20 @@ def test_cli_writes_table_and_report(tmp_path, capsys):
         assert col in t
     assert doc["summary"]["phso"]["scenarios"] == 6
     assert (out / "report.md").exists() and (out / "figures" / "histograms.png").exists()
+    # every row: its largest input rate and whether it stayed in the certified envelope
+    udot = load_config("configs/paper_experiment.toml").envelope().udot_max
+    assert doc["columns"] == list(t) and t["within_envelope"] == [
+        s and r <= udot for s, r in zip(t["stable"], t["input_rate_max"], strict=True)
+    ]
+    for obs, s in doc["summary"].items():
+        sel = [o == obs for o in t["observer"]]
+        out_ = sum(not w for w, k in zip(t["within_envelope"], sel, strict=True) if k)
+        assert (s["udot_max"], s["outside_envelope"]) == (udot, out_)
+        assert s["replay"]["sensitive"] is (
+            max(s["replay"]["replay_difference"], s["replay"]["perturbation_change"]) > 1e-6
+        )
+    md = (out / "report.md").read_text()
+    assert f"assume |u'| <= {udot:.4g} V/s" in md and "replayed with simulate()" in md
 
 
 def test_missing_extra_names_it(tmp_path, capsys, monkeypatch):
@@ -340,6 +516,8 @@ def test_report_includes_the_configs_sweep(tmp_path, capsys):
         (("samples = 100", "samples = 0"), r"\[sweep\] samples must be an integer > 0"),
         (("samples = 100", 'samples = 100\ntuning = "fast"'), r"\[sweep\] tuning must be one of"),
         (("samples = 100", 'samples = 100\nobservers = ["ukf"]'), r"\[sweep\] observers"),
+        (("samples = 100", 'samples = 100\nobservers = ["eso", "eso"]'), r"given once"),
+        (("samples = 100", "samples = 100000000"), r"\[sweep\] samples: .* at most \d+"),
     ],
 )
 def test_report_sweep_bad_input(tmp_path, capsys, edit, message):

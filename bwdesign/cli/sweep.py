@@ -18,18 +18,28 @@ from ..model.params import MODEL_FIELDS
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from ..sim.sweep import (
-    METRIC_COLUMNS,
+    WORKERS_PER_CPU,
     SweepError,
     SweepSpec,
     bounds_from_config,
     box_bounds,
+    check_observers,
+    check_samples,
+    check_scheduler,
+    check_workers,
     draw_scenarios,
     run_sweep,
     spec_from_config,
 )
 from .args import EXIT_NO, EXIT_OK, nonneg_float, nonneg_int, positive_float, positive_int
 
-__all__ = ["sweep_args", "run_sweep_command", "parse_uncertainty"]
+__all__ = [
+    "sweep_args",
+    "run_sweep_command",
+    "parse_uncertainty",
+    "parse_observers",
+    "check_limits",
+]
 
 
 def parse_uncertainty(text: str) -> dict[str, tuple[str, float]]:
@@ -50,17 +60,50 @@ def parse_uncertainty(text: str) -> dict[str, tuple[str, float]]:
             raise InputError(f"--uncertainty: {name}: not a number: {value!r}") from None
         if not math.isfinite(w) or w < 0:
             raise InputError(f"--uncertainty: {name}: half-width must be >= 0, got {value!r}")
+        if name in out:
+            raise InputError(
+                f"--uncertainty: {name} given twice ({_width(out[name])} and {value}); "
+                "give each parameter once"
+            )
         out[name] = ("rel", w / 100) if rel else ("abs", w)
     if not out:
         raise InputError("--uncertainty: no parameter given")
     return out
 
 
+def _width(spec: tuple[str, float]) -> str:
+    kind, w = spec
+    return f"{100 * w:g}%" if kind == "rel" else f"{w:g}"
+
+
+def parse_observers(text: str) -> tuple[str, ...]:
+    """``"phso, ESO"`` -> ``("phso", "eso")``: known names, each once."""
+    return check_observers(tuple(o.strip().lower() for o in text.split(",") if o.strip()))
+
+
+def check_limits(args: argparse.Namespace) -> tuple[tuple[str, ...], dict | None]:
+    """Every limit the arguments alone decide, before any file is read or any work done.
+
+    Returns the observers and the parsed ``--uncertainty`` (None without it).
+    """
+    observers = parse_observers(args.observers)
+    check_samples(args.samples, len(observers))
+    if args.scheduler is None:
+        check_workers(args.workers)
+    check_scheduler(args.scheduler)
+    widths = None if args.uncertainty is None else parse_uncertainty(args.uncertainty)
+    return observers, widths
+
+
 def sweep_args(p: argparse.ArgumentParser) -> None:
     """Arguments of ``bwdesign sweep``."""
     p.add_argument("--config", required=True, metavar="STAGE.toml", help="stage configuration")
     p.add_argument(
-        "--samples", required=True, type=positive_int, metavar="N", help="scenarios (> 0)"
+        "--samples",
+        required=True,
+        type=positive_int,
+        metavar="N",
+        help="scenarios (> 0; at most what fits in half the memory, see the error message)",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument(
@@ -115,13 +158,14 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
         type=nonneg_int,
         default=None,
         metavar="K",
-        help="local Dask worker processes (default: one per CPU; 0: in this process)",
+        help="local Dask worker processes (default: one per CPU, at most "
+        f"{WORKERS_PER_CPU} per CPU; 0: in this process)",
     )
     where.add_argument(
         "--scheduler",
         default=None,
         metavar="ADDRESS",
-        help="address of a running dask.distributed scheduler",
+        help="address of a running dask.distributed scheduler, tcp://HOST:PORT",
     )
     p.add_argument(
         "--chunk-size",
@@ -146,8 +190,7 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
-def _spec(config, args) -> SweepSpec:
-    observers = tuple(o.strip().lower() for o in args.observers.split(",") if o.strip())
+def _spec(config, args, observers) -> SweepSpec:
     return spec_from_config(
         config,
         tuning=args.tuning,
@@ -176,14 +219,34 @@ def _progress(quiet: bool):
     return update, bar
 
 
+def _envelope_text(spec: SweepSpec, s: dict) -> str:
+    """``; 12 outside the envelope |u'| <= 397 V/s (up to 8.7x); worst replay differs ...``."""
+    iu = spec.params.input_unit
+    text = ""
+    if s["outside_envelope"] is not None:
+        text = f"; {s['outside_envelope']} outside the envelope |u'| <= {spec.udot_max:.4g} {iu}/s"
+        if s["outside_envelope"]:
+            text += f" (up to {s['worst_envelope_ratio']:.3g}x)"
+    rep = s.get("replay")
+    if rep and rep["sensitive"]:
+        d = rep["replay_difference"]
+        diff = "diverges differently" if math.isinf(d) else f"differs by {100 * d:.2g} %"
+        text += (
+            f"; worst row sensitive to rounding (its replay {diff}): "
+            "rows like it reproduce only statistically"
+        )
+    return text
+
+
 def run_sweep_command(args: argparse.Namespace) -> int:
     from ..report.sweep import write_sweep
 
+    observers, widths = check_limits(args)
     target = prepare_directory(args.out, command="sweep", force=args.force, what="--out")
     config = load_config(args.config)
-    spec = _spec(config, args)
-    if args.uncertainty is not None:
-        bounds = box_bounds(spec.params, parse_uncertainty(args.uncertainty))
+    spec = _spec(config, args, observers)
+    if widths is not None:
+        bounds = box_bounds(spec.params, widths)
     else:
         bounds = bounds_from_config(config)
     scenarios = draw_scenarios(
@@ -215,15 +278,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
                     "out_dir": str(args.out),
                     "summary": summary,
                     "bounds": bounds,
-                    "columns": [
-                        "scenario",
-                        *MODEL_FIELDS,
-                        "noise_seed",
-                        "observer",
-                        *METRIC_COLUMNS,
-                        "stable",
-                        "status",
-                    ],
+                    "columns": list(table),
                 }
             )
         )
@@ -237,7 +292,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         )
         print(
             f"{obs.upper()}: {s['scenarios']} scenarios, {s['unstable']} unstable; {med} "
-            f"{spec.params.length_unit}"
+            f"{spec.params.length_unit}{_envelope_text(spec, s)}"
         )
     print(f"{args.out}/scenarios.parquet, {args.out}/report.md")
     return EXIT_OK

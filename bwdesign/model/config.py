@@ -204,6 +204,12 @@ def _sweep(table: Any) -> dict[str, Any] | None:
             raise ConfigError(
                 f'[sweep] observers must be a list of "phso", "eso", "phdo", got {obs!r}'
             )
+        twice = sorted({o for o in obs if obs.count(o) > 1})
+        if twice:
+            raise ConfigError(
+                f"[sweep] observers must each be given once, got {', '.join(twice)} more than "
+                "once (every scenario would count twice)"
+            )
         out["observers"] = tuple(obs)
     for key in ("noise_std_um", "duration_s"):
         if key in t:

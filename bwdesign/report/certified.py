@@ -31,7 +31,7 @@ from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
 from ..control.analysis import analyze_loop
 from ..control.tuning import digital_tuning
-from ..errors import ConfigError
+from ..errors import ConfigError, InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope
 from ..model.params import require_bounded
@@ -39,7 +39,7 @@ from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
-from ..sim.sweep import bounds_from_config
+from ..sim.sweep import bounds_from_config, check_samples
 from .document import Document
 from .document import fmt as _fmt
 from .robust import robust_section
@@ -370,6 +370,10 @@ def build_report(
         check_gains(params, config.gains)
     if config.sweep is not None:
         bounds_from_config(config)  # [sweep] needs a finite [uncertainty] box: say so now
+        try:
+            check_samples(config.sweep["samples"], len(config.sweep["observers"]))
+        except InputError as err:
+            raise ConfigError(f"{config.source or 'config'}: [sweep] samples: {err}") from None
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
 

@@ -2,17 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..model.params import MODEL_FIELDS
 from ..output.files import DirectoryTarget
-from ..sim.closed_loop import simulate
-from ..sim.start import start_on_reference
+from ..sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, RowReplay, replay_row
 from ..sim.sweep import (
     SweepSpec,
     bounds_from_config,
@@ -27,8 +25,16 @@ __all__ = ["sweep_document", "sweep_summary", "sweep_section", "write_sweep"]
 QUANTILES = (0.5, 0.9, 0.99)
 
 
-def sweep_summary(table: Mapping[str, np.ndarray]) -> dict[str, Any]:
-    """Per observer: scenario count, fraction unstable, quantiles and max of each metric."""
+def sweep_summary(
+    table: Mapping[str, np.ndarray], *, udot_max: float | None = None
+) -> dict[str, Any]:
+    """Per observer: scenario count, fraction unstable, quantiles and max of each metric.
+
+    With the envelope ``udot_max`` the loop's certificate assumed and the table's
+    ``within_envelope`` column: ``outside_envelope`` (stable scenarios whose input
+    rate left it), its fraction of all scenarios and ``worst_envelope_ratio``
+    (largest ``input_rate_max / udot_max``); None without an envelope.
+    """
     out: dict[str, Any] = {}
     for obs in dict.fromkeys(table["observer"].tolist()):
         sel = table["observer"] == obs
@@ -38,6 +44,7 @@ def sweep_summary(table: Mapping[str, np.ndarray]) -> dict[str, Any]:
             "unstable": int((~stable).sum()),
             "fraction_unstable": float((~stable).mean()),
         }
+        doc.update(_envelope_summary(table, sel, udot_max))
         for m in ("me", "maxe", "rmse"):
             v = table[m][sel][stable]
             doc[m] = (
@@ -53,13 +60,47 @@ def sweep_summary(table: Mapping[str, np.ndarray]) -> dict[str, Any]:
     return out
 
 
+def _envelope_summary(
+    table: Mapping[str, np.ndarray], sel: np.ndarray, udot_max: float | None
+) -> dict[str, Any]:
+    stable = table["stable"][sel]
+    rates = table["input_rate_max"][sel][stable] if "input_rate_max" in table else np.array([])
+    doc: dict[str, Any] = {
+        "input_rate_max": (
+            {
+                "max": float(rates.max()),
+                "worst_scenario": int(table["scenario"][sel][stable][rates.argmax()]),
+            }
+            if rates.size
+            else None
+        ),
+        "udot_max": udot_max,
+        "outside_envelope": None,
+        "fraction_outside_envelope": None,
+        "worst_envelope_ratio": None,
+    }
+    if udot_max is not None and "within_envelope" in table:
+        outside = stable & ~table["within_envelope"][sel]
+        doc["outside_envelope"] = int(outside.sum())
+        doc["fraction_outside_envelope"] = float(outside.mean())
+        doc["worst_envelope_ratio"] = float(rates.max() / udot_max) if rates.size else None
+    return doc
+
+
 def _quantile_table(doc: Document, summary: Mapping[str, Any]) -> None:
-    header = ["observer", "unstable"] + [
+    header = ["observer", "unstable", "outside the envelope"] + [
         f"{m.upper()} {q}" for m in ("me", "maxe", "rmse") for q in ("p50", "p90", "p99", "max")
     ]
     body = []
     for obs, s in summary.items():
-        row = [obs.upper(), f"{s['unstable']} ({100 * s['fraction_unstable']:.2f} %)"]
+        row = [
+            obs.upper(),
+            f"{s['unstable']} ({100 * s['fraction_unstable']:.2f} %)",
+            "-"
+            if s["outside_envelope"] is None
+            else f"{s['outside_envelope']} ({100 * s['fraction_outside_envelope']:.2f} %)"
+            + ("" if not s["outside_envelope"] else f", up to {s['worst_envelope_ratio']:.3g}x"),
+        ]
         for m in ("me", "maxe", "rmse"):
             row += (
                 ["-"] * 4
@@ -91,7 +132,7 @@ def sweep_section(doc: Document, config: Any, figs: Path) -> dict[str, Any]:
     dist = cfg.get("distribution", "uniform")
     scenarios = draw_scenarios(spec.params, bounds, n, seed=seed, distribution=dist)
     table = run_sweep(spec, scenarios, chunk_size=n, workers=0)
-    summary = sweep_summary(table)
+    summary = sweep_summary(table, udot_max=spec.udot_max)
     lu = spec.params.length_unit
     doc.heading("Robustness over the uncertainty box (Monte Carlo)")
     box = ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in bounds.items())
@@ -106,6 +147,7 @@ def sweep_section(doc: Document, config: Any, figs: Path) -> dict[str, Any]:
         f"{cfg.get('tuning', 'config')} --noise-std {spec.noise_std:g} --out DIR`."
     )
     _quantile_table(doc, summary)
+    _envelope_para(doc, spec, summary, n, replays=False)
     fig, _ = plot_sweep_histograms(dict(table), length_unit=lu, title="stable scenarios")
     plotting.save_figure(fig, figs / "sweep_histograms.png")
     doc.figure("figures/sweep_histograms.png", f"ME, MAXE and RMSE ({lu}) over the scenarios")
@@ -125,7 +167,7 @@ def sweep_document(
     from ..plotting.sweep import plot_sweep_histograms
 
     lu = spec.params.length_unit
-    summary = sweep_summary(table)
+    summary = sweep_summary(table, udot_max=spec.udot_max)
     doc = Document(title=f"Monte Carlo sweep: {spec.params.name or 'stage'}")
     n = len(np.unique(table["scenario"]))
     doc.para(
@@ -151,7 +193,16 @@ def sweep_document(
     fig, _ = plot_sweep_histograms(dict(table), length_unit=lu, title="stable scenarios")
     plotting.save_figure(fig, figs / "histograms.png")
     doc.figure("figures/histograms.png", f"ME, MAXE and RMSE ({lu}) of the stable scenarios")
+    doc.heading("Input rate and the certified envelope")
+    _envelope_para(doc, spec, summary, n)
     doc.heading("Worst scenarios, replayed")
+    doc.para(
+        "Each observer's worst row replayed with simulate(), then replayed once more with "
+        f"a1 changed by {SENSITIVITY_STEP:g} (relative): where the loop is insensitive to "
+        "rounding both agree with the row to rounding; where it is sensitive (chaotic), "
+        "they differ by far more, and such rows reproduce only statistically (the same "
+        "sweep command on the same machine reproduces them bit for bit)."
+    )
     for obs, s in summary.items():
         unstable = table["scenario"][(table["observer"] == obs) & ~table["stable"]]
         worst = (
@@ -162,34 +213,15 @@ def sweep_document(
         if worst is None:
             continue
         i = int(np.flatnonzero(table["scenario"] == worst)[0])
-        tp = replace(spec.params, **{k: float(table[k][i]) for k in MODEL_FIELDS})
-        run = simulate(
-            spec.params,
-            spec.reference,
-            dt=spec.dt,
-            duration=spec.duration,
-            observer=obs,
-            gains=spec.gains_for(obs),
-            controller=spec.controller,
-            true_params=tp,
-            noise_std=spec.noise_std,
-            seed=int(table["noise_seed"][i]),
-            delay=spec.delay,
-            **(
-                start_on_reference(spec.params, spec.reference) if spec.start == "reference" else {}
-            ),
-        )
+        rep = replay_row(spec, table, worst, obs)
+        s["replay"] = rep.to_dict()
         what = "the first unstable scenario" if unstable.size else "the largest ME"
         drawn = ", ".join(f"{k} = {float(table[k][i]):.6g}" for k in bounds) or "nominal"
-        metrics = (
-            f"ME {run.metrics.me:.4g}, MAXE {run.metrics.maxe:.4g} {lu}"
-            if run.metrics
-            else run.status
-        )
         doc.para(
             f"{obs.upper()}: scenario {worst} ({what}; {drawn}; noise seed "
-            f"{int(table['noise_seed'][i])}): {metrics}."
+            f"{int(table['noise_seed'][i])}): {_replay_text(rep, lu, spec.params.input_unit)}"
         )
+        run = rep.run
         fig, _ = plotting.plot_simulation(run, title=f"{obs.upper()}, scenario {worst}")
         name = f"worst_{obs}.png"
         plotting.save_figure(fig, figs / name)
@@ -200,6 +232,77 @@ def sweep_document(
         "this configuration yet, so the sweep's worst case is not compared with one."
     )
     return doc, summary
+
+
+def _metrics_text(m: Mapping[str, float] | None, lu: str, iu: str) -> str:
+    if m is None:
+        return "diverged"
+    rate = f"|u'| up to {m['input_rate_max']:.4g} {iu}/s"
+    return f"ME {m['me']:.6g}, MAXE {m['maxe']:.6g} {lu}, {rate}"
+
+
+def _relative(d: float | None) -> str:
+    if d is None or math.isinf(d):
+        return "a run that diverged where the other did not"
+    return f"up to {d:.2g}, relative"
+
+
+def _replay_text(rep: RowReplay, lu: str, iu: str) -> str:
+    """The row, its replay, the perturbed replay and what that says about the row."""
+    if rep.sensitive is None:
+        return f"diverged in the sweep and in the replay ({rep.run.status})."
+    text = (
+        f"row {_metrics_text(rep.row, lu, iu)}; replayed with simulate(): "
+        f"{_metrics_text(rep.replayed, lu, iu)} (ME and MAXE differ from the row by "
+        f"{_relative(rep.replay_difference)}); with a1 x (1 + {SENSITIVITY_STEP:g}): "
+        f"{_metrics_text(rep.perturbed, lu, iu)} ({_relative(rep.perturbation_change)} from the "
+        "replay). "
+    )
+    if rep.sensitive:
+        return text + (
+            f"This loop is sensitive to rounding (above {SENSITIVE_RTOL:g}): its row "
+            "reproduces only statistically, not digit for digit."
+        )
+    return text + f"Replay and row agree (within {SENSITIVE_RTOL:g}): the row reproduces."
+
+
+def _envelope_para(
+    doc: Document, spec: SweepSpec, summary: Mapping[str, Any], n: int, *, replays: bool = True
+) -> None:
+    """How far each observer's input rate left the envelope the certificate assumed."""
+    iu = spec.params.input_unit
+    rates = []
+    for obs, s in summary.items():
+        r = s["input_rate_max"]
+        if r is None:
+            rates.append(f"{obs.upper()}: no stable scenario")
+        elif s["outside_envelope"] is None:
+            rates.append(f"{obs.upper()} up to {r['max']:.4g} {iu}/s")
+        else:
+            rates.append(
+                f"{obs.upper()} up to {r['max']:.4g} {iu}/s ({s['worst_envelope_ratio']:.3g}x the "
+                f"envelope, scenario {r['worst_scenario']}): {s['outside_envelope']} of {n} "
+                f"scenarios ({100 * s['fraction_outside_envelope']:.2f} %) outside"
+            )
+    measured = (
+        "Largest |u'| (|u_k - u_(k-1)| / dt) over the metrics window: " + "; ".join(rates) + "."
+    )
+    if spec.udot_max is None:
+        doc.para(f"{measured} No envelope to compare with: {spec.envelope_source}.")
+        return
+    outside = sum(s["outside_envelope"] or 0 for s in summary.values())
+    doc.para(
+        f"The certificates of this loop assume |u'| <= {spec.udot_max:.4g} {iu}/s "
+        f"({spec.envelope_source}). {measured}"
+        + (
+            " The rows outside (within_envelope = false in scenarios.parquet) are outside "
+            "every certified statement: their errors are simulated, not covered. There the "
+            "loop's input chatters and the loop can be chaotic, so those rows reproduce only "
+            "statistically" + (" (see the replays below)." if replays else ".")
+            if outside
+            else " Every stable scenario stayed inside it."
+        )
+    )
 
 
 def write_sweep(

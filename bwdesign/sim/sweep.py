@@ -11,6 +11,13 @@
   and then reported (:class:`SweepError`), never dropped. The rows are put back in
   scenario order, so the result is the same for any chunking and any number of
   workers.
+- Every row records the largest input rate ``input_rate_max`` over the metrics
+  window and, when the spec names the envelope its certificate assumed
+  (``SweepSpec.udot_max``), whether it stayed inside (``within_envelope``).
+  A certificate says nothing about a row outside it.
+- The limits are checked before any work: :func:`check_samples` (memory),
+  :func:`check_workers` (local cluster size), :func:`check_scheduler` (address
+  form) and :func:`check_observers` (each observer once).
 
 This module is the only one that imports dask (inside functions).
 """
@@ -20,6 +27,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from statistics import NormalDist
@@ -33,6 +41,7 @@ from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from ..observers.gains import disturbance_gains_from
+from ..validate import UDOT_MAX, Range, integer, real
 from .batch import BATCH_OBSERVERS, simulate_batch
 from .start import start_on_reference
 
@@ -47,11 +56,42 @@ __all__ = [
     "check_box",
     "spec_from_config",
     "bounds_from_config",
+    "check_samples",
+    "check_workers",
+    "check_scheduler",
+    "check_observers",
+    "max_samples",
+    "max_workers",
+    "WORKERS_PER_CPU",
+    "ROW_BYTES",
+    "MEMORY_CAP",
 ]
 
 DISTRIBUTIONS = ("uniform", "normal")
 #: Result columns per (scenario, observer) row, after the drawn ones.
-METRIC_COLUMNS = ("maxe", "me", "rmse", "est_rmse_x1", "est_rmse_x2", "est_rmse_x3")
+METRIC_COLUMNS = (
+    "maxe",
+    "me",
+    "rmse",
+    "est_rmse_x1",
+    "est_rmse_x2",
+    "est_rmse_x3",
+    "input_rate_max",
+)
+#: Local Dask worker processes per CPU at most: the chunks are CPU-bound, so more
+#: processes only queue on the same cores (and each costs ~100 MB and a start-up).
+WORKERS_PER_CPU = 2
+#: Peak memory per (scenario, observer) row of a sweep, in bytes: the growth of the
+#: peak resident size of ``bwdesign sweep`` (two observers, --workers 0) from 50 000 to
+#: 200 000 scenarios, 433 bytes per row (drawn columns, chunk results, the ordered
+#: table, the Parquet copy), rounded up.
+ROW_BYTES = 440
+#: A sweep plans for at most half the machine's memory and never more than this.
+MEMORY_CAP = 8 * 2**30
+_ADDRESS = re.compile(
+    r"(?:(?P<scheme>tcp|tls)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?)"
+    r":(?P<port>[0-9]{1,5})/?"
+)
 
 
 class SweepError(BWDesignError, RuntimeError):
@@ -81,6 +121,12 @@ class SweepSpec:
     start : {"reference", "rest"}
         Every scenario starts on the reference (:func:`bwdesign.start_on_reference`,
         as the report's runs) or from rest.
+    udot_max : float, optional
+        The input-rate envelope |u'| <= udot_max (input unit/s) the loop's certificate
+        assumed; each row then says whether its input stayed inside
+        (``within_envelope``). None: rates are recorded, not compared.
+    envelope_source : str
+        Where ``udot_max`` comes from, for reports.
     """
 
     params: BoucWenParams
@@ -93,6 +139,8 @@ class SweepSpec:
     noise_std: float = 0.0
     delay: bool = False
     start: str = "reference"
+    udot_max: float | None = None
+    envelope_source: str = ""
 
     def gains_for(self, observer: str) -> tuple[float, ...]:
         """The continuous gains ``observer`` runs: ``gains``; ``(l1, l2, 0, l3)`` for the PHDO."""
@@ -101,11 +149,125 @@ class SweepSpec:
     def __post_init__(self) -> None:
         if self.start not in ("reference", "rest"):
             raise InputError(f"start must be 'reference' or 'rest', got {self.start!r}")
-        bad = [o for o in self.observers if o not in BATCH_OBSERVERS]
-        if not self.observers or bad:
-            raise InputError(
-                f"sweep observers must be among {', '.join(BATCH_OBSERVERS)}, got {self.observers}"
-            )
+        check_observers(self.observers)
+        if self.udot_max is not None:
+            real(self.udot_max, "udot_max (input unit/s)", within=UDOT_MAX)
+
+
+def check_observers(observers: Sequence[str]) -> tuple[str, ...]:
+    """``observers`` as a tuple: each among :data:`BATCH_OBSERVERS`, each once.
+
+    Raises
+    ------
+    InputError
+        None given, an unknown name, or a name given twice (it would count every
+        scenario twice).
+    """
+    obs = tuple(observers)
+    bad = [o for o in obs if o not in BATCH_OBSERVERS]
+    if not obs or bad:
+        raise InputError(f"sweep observers must be among {', '.join(BATCH_OBSERVERS)}, got {obs}")
+    twice = sorted({o for o in obs if obs.count(o) > 1})
+    if twice:
+        raise InputError(
+            f"sweep observers must each be given once: {', '.join(twice)} given "
+            f"{max(obs.count(o) for o in twice)} times (every scenario would count twice)"
+        )
+    return obs
+
+
+def max_workers() -> int:
+    """Most local worker processes a sweep starts: :data:`WORKERS_PER_CPU` per CPU."""
+    return WORKERS_PER_CPU * (os.cpu_count() or 1)
+
+
+def check_workers(workers: Any) -> int | None:
+    """``workers`` (None, 0 or a local cluster's size) after checking it fits this machine.
+
+    Raises
+    ------
+    InputError
+        Not an integer >= 0, or more than :func:`max_workers`.
+    """
+    if workers is None:
+        return None
+    n = integer(workers, "workers", within=Range(0, math.inf))
+    limit = max_workers()
+    if n > limit:
+        raise InputError(
+            f"workers = {n} is more than a local cluster can run here: at most {limit} worker "
+            f"processes ({WORKERS_PER_CPU} per CPU, {os.cpu_count() or 1} CPU(s)); "
+            "a larger cluster runs elsewhere (--scheduler)"
+        )
+    return n
+
+
+def check_scheduler(address: Any) -> str | None:
+    """``address`` of a dask scheduler after checking its form ``[tcp|tls://]HOST:PORT``.
+
+    Raises
+    ------
+    InputError
+        Not a string of that form, or a port outside 1..65535.
+    """
+    if address is None:
+        return None
+    m = _ADDRESS.fullmatch(address.strip()) if isinstance(address, str) else None
+    if m is None or not 1 <= int(m["port"]) <= 65535:
+        raise InputError(
+            f"scheduler address {address!r} is not of the form tcp://HOST:PORT "
+            "(or tls://HOST:PORT, or HOST:PORT; PORT in 1..65535)"
+        )
+    return address.strip()
+
+
+def _memory() -> tuple[int, str]:
+    """Bytes a sweep may plan for, and why."""
+    try:
+        total = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        total = 0
+    cap = f"{MEMORY_CAP / 2**30:g} GiB"
+    if total <= 0:
+        return MEMORY_CAP, f"this machine's memory is unknown: the cap of {cap}"
+    half = f"half of this machine's {total / 2**30:.3g} GiB"
+    if total // 2 < MEMORY_CAP:
+        return total // 2, half
+    return MEMORY_CAP, f"{half}, capped at {cap}"
+
+
+def max_samples(n_observers: int = 1) -> int:
+    """Most scenarios one sweep holds with ``n_observers`` observers.
+
+    The memory a sweep plans for (half the machine's, at most :data:`MEMORY_CAP`)
+    over :data:`ROW_BYTES` per (scenario, observer) row.
+    """
+    k = integer(n_observers, "number of observers", within=Range(1, math.inf))
+    return _memory()[0] // (ROW_BYTES * k)
+
+
+def check_samples(n: Any, n_observers: int = 1) -> int:
+    """``n`` scenarios after checking they fit in memory with ``n_observers`` observers.
+
+    Raises
+    ------
+    InputError
+        Not an integer > 0, or more than :func:`max_samples`.
+    """
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n <= 0:
+        raise InputError(f"the number of samples must be an integer > 0, got {n!r}")
+    n = int(n)
+    limit = max_samples(n_observers)
+    if n > limit:
+        budget, why = _memory()
+        need = n * n_observers * ROW_BYTES
+        raise InputError(
+            f"{n} scenarios x {n_observers} observer(s) need about {need / 2**30:.3g} GiB "
+            f"({ROW_BYTES} bytes per row); a sweep plans for at most {budget / 2**30:.3g} GiB "
+            f"({why}): at most {limit} scenarios with {n_observers} observer(s). "
+            "Run a larger study as several sweeps with different seeds"
+        )
+    return n
 
 
 def box_bounds(
@@ -180,8 +342,7 @@ def draw_scenarios(
     (sigma = half-width / z), truncated to the box (inverse-CDF sampling, so one
     uniform number per parameter and scenario as for ``uniform``).
     """
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n <= 0:
-        raise InputError(f"the number of samples must be an integer > 0, got {n!r}")
+    check_samples(n)
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise InputError(f"seed must be an integer >= 0, got {seed!r}")
     if distribution not in DISTRIBUTIONS:
@@ -224,7 +385,13 @@ def _true_params(params: BoucWenParams, cols: Mapping[str, np.ndarray]) -> list[
 
 
 def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Run one chunk of scenarios for every observer of ``spec``: one row per pair."""
+    """Run one chunk of scenarios for every observer of ``spec``: one row per pair.
+
+    Columns: the drawn ones, ``observer``, :data:`METRIC_COLUMNS` (metrics over the
+    steady-state window; ``input_rate_max`` is the largest ``|u_k - u_(k-1)| / dt``
+    there), ``stable``, ``within_envelope`` (stable with ``input_rate_max <=
+    spec.udot_max``; only when the spec names an envelope) and ``status``.
+    """
     tps = _true_params(spec.params, cols)
     init = start_on_reference(spec.params, spec.reference) if spec.start == "reference" else {}
     out: dict[str, list[np.ndarray]] = {}
@@ -249,7 +416,11 @@ def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.n
         part.update(maxe=res.maxe, me=res.me, rmse=res.rmse)
         for i in range(3):
             part[f"est_rmse_x{i + 1}"] = res.estimation_rmse[:, i]
+        part["input_rate_max"] = res.input_rate_max
         part["stable"] = res.stable
+        if spec.udot_max is not None:
+            with np.errstate(invalid="ignore"):
+                part["within_envelope"] = res.stable & (res.input_rate_max <= spec.udot_max)
         part["status"] = np.array(res.status, dtype=object)
         for k, v in part.items():
             out.setdefault(k, []).append(v)
@@ -289,9 +460,10 @@ def run_sweep(
         Scenarios per task.
     workers : int, optional
         ``0``: in this process, no Dask. ``K >= 1``: a LocalCluster of ``K``
-        worker processes (default: the number of CPUs). Ignored with ``scheduler``.
+        worker processes (default: the number of CPUs; at most :func:`max_workers`).
+        Ignored with ``scheduler``.
     scheduler : str, optional
-        Address of a running ``dask.distributed`` scheduler.
+        Address of a running ``dask.distributed`` scheduler (``tcp://HOST:PORT``).
     retries : int
         Retries of a failed chunk before the sweep fails.
     timeout : float
@@ -301,16 +473,17 @@ def run_sweep(
 
     Raises
     ------
+    InputError
+        More scenarios than :func:`max_samples`, more workers than :func:`max_workers`,
+        a malformed scheduler address, a bad chunk size.
     SweepError
         A chunk failed after its retries, or the scheduler did not answer.
     """
-    n = len(scenarios["scenario"])
+    n = check_samples(len(scenarios["scenario"]), len(spec.observers))
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size <= 0:
         raise InputError(f"chunk_size must be an integer > 0, got {chunk_size!r}")
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, int) or workers < 0
-    ):
-        raise InputError(f"workers must be an integer >= 0, got {workers!r}")
+    workers = check_workers(workers)
+    scheduler = check_scheduler(scheduler)
     slices = _chunks(n, chunk_size)
     pieces = [{k: np.asarray(v)[s] for k, v in scenarios.items()} for s in slices]
     total = len(pieces)
@@ -354,6 +527,11 @@ def _run_dask(spec, pieces, slices, workers, scheduler, retries, timeout, progre
             except (OSError, TimeoutError) as err:
                 raise SweepError(
                     f"no Dask scheduler answered at {scheduler!r} within {timeout:g} s ({err})"
+                ) from None
+            except (TypeError, ValueError) as err:  # e.g. tls:// without a TLS configuration
+                raise SweepError(
+                    f"could not connect to the Dask scheduler at {scheduler!r} "
+                    f"({type(err).__name__}: {err})"
                 ) from None
         else:
             try:
@@ -412,7 +590,9 @@ def spec_from_config(
     """The sweep of a stage's loop: ``tuning="config"`` runs the ``[observer]`` gains and
     ``[controller]`` constants (eq. 12 in ``form``), ``"digital"`` the digital tuning
     (:func:`bwdesign.digital_tuning`); ``[controller]`` limits apply in both. ``duration``
-    defaults to three reference periods, at least 1 s.
+    defaults to three reference periods, at least 1 s. ``udot_max`` is the stage's
+    ``[envelope]`` (the one its certificates assume), else the envelope the reference
+    itself needs (:func:`bwdesign.derive_envelope`, margin 1).
     """
     from ..control.controllers import make_controller
     from ..control.tuning import digital_tuning
@@ -456,6 +636,7 @@ def spec_from_config(
         )
     period = config.reference.period
     duration = duration or max(1.0, 3 * period if period else 1.0)
+    udot_max, source = _stage_envelope(config)
     return SweepSpec(
         params=params,
         reference=config.reference,
@@ -467,7 +648,28 @@ def spec_from_config(
         noise_std=noise_std,
         delay=delay,
         start=start,
+        udot_max=udot_max,
+        envelope_source=source,
     )
+
+
+def _stage_envelope(config: Any) -> tuple[float | None, str]:
+    """The envelope the stage's certificates assume: ``[envelope]``, else the reference's own."""
+    from ..model.envelope import derive_envelope
+
+    if config.envelope_spec is not None:
+        env = config.envelope()
+        how = (
+            "stated in [envelope]"
+            if env.source == "given"
+            else f"[envelope]: derived from [reference], margin {env.margin:g}"
+        )
+        return env.udot_max, how
+    try:
+        env = derive_envelope(config.plant, config.reference)
+    except InputError as err:  # a sharp step has no finite rate: nothing to compare with
+        return None, f"none (no [envelope], and {err})"
+    return env.udot_max, "derived from [reference] (no [envelope] in the stage; margin 1)"
 
 
 def bounds_from_config(config: Any) -> dict[str, tuple[float, float]]:
