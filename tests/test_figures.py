@@ -213,3 +213,18 @@ def test_styles_by_words():
     # runs of one observer that differ by something else get a line style each
     assert sty("PHSO dt = 0.2 ms")["ls"] != sty("PHSO dt = 0.05 ms")["ls"]
     assert sty("PHSO dt = 0.2 ms")["ls"] == sty("ESO dt = 0.2 ms")["ls"]
+
+
+def test_a_run_that_diverged_does_not_set_the_span():
+    """The span is the first bounded run's window; a diverged run is named with its time."""
+    bad = _run(0, 5.0)
+    keep = bad.t <= 0.1
+    bad = SimpleNamespace(**{**vars(bad), "metrics": None, "stable": False, "window": (0.08, 0.1)})
+    for k in ("t", "x", "xhat", "x_d", "e", "u"):
+        setattr(bad, k, getattr(bad, k)[keep])
+    fig, axes = figures.plot_tracking_comparison(
+        {"PHSO (eq. 12)": bad, "PHSO (digital tuning)": RUNS[LABELS[3]]}
+    )
+    assert axes[-1, 0].get_xlim()[0] > 0.4  # the bounded run's window (0.5 .. 1 s)
+    texts = [t.get_text() for t in axes[0, 0].get_legend().get_texts()]
+    assert f"PHSO (eq. 12): diverged at t = {bad.t[-1]:.3g} s" in texts

@@ -305,7 +305,9 @@ def plot_tracking_comparison(
     ``show_input``, a last panel with the control input. Errors whose peaks
     differ by more than ``split_ratio`` get panels of their own (at most three,
     largest first), so a sub-micrometre error is not drawn as a flat line
-    beside a 60 um one. Every panel has its legend to the right of the data.
+    beside a 60 um one. Every panel has its legend to the right of the data. A
+    run that diverged before the span is named in the legend with the time it
+    diverged.
 
     Parameters
     ----------
@@ -314,7 +316,7 @@ def plot_tracking_comparison(
         the label picks the colour, the law ``eq. 12``/``digital tuning`` the line style).
     title : str
     t_range : (float, float), optional
-        Span shown (s); default the metrics window of the first run.
+        Span shown (s); default the metrics window of the first run that has one.
     show_input : bool
     split_ratio : float
         Peak ratio above which errors go to separate panels.
@@ -326,30 +328,39 @@ def plot_tracking_comparison(
         Output, one to three error panels, then the input (with ``show_input``).
     """
     first = next(iter(results.values()))
-    if t_range is None:
-        t_range = first.window
+    if t_range is None:  # a run that diverged has no metrics window of its own
+        t_range = next(
+            (r.window for r in results.values() if getattr(r, "metrics", 1) is not None),
+            first.window,
+        )
     sel = {}
     for label, r in results.items():
         t = np.asarray(r.t)
         sel[label] = (t >= t_range[0]) & (t <= t_range[1])
+    # a run with no sample in the span (it diverged before) is named in the legend only
+    shown = [label for label in results if np.any(sel[label])]
     peaks = {}
-    for label, r in results.items():
-        e = np.abs(np.asarray(r.e)[sel[label]])
-        peaks[label] = float(np.max(e)) if e.size and np.all(np.isfinite(e)) else np.nan
-    groups = _magnitude_groups(peaks, split_ratio, 3)
+    for label in shown:
+        e = np.abs(np.asarray(results[label].e)[sel[label]])
+        peaks[label] = float(np.max(e)) if np.all(np.isfinite(e)) else np.nan
+    groups = _magnitude_groups(peaks, split_ratio, 3) or [[]]
     n = 1 + len(groups) + int(show_input)
     fig, axes = new_figure(n, 1, figsize=(10.0, 2.3 * n + 0.8), sharex=True)
     a = axes[:, 0]
     sty = Styler()
     lu = first.length_unit
-    t0, s0 = np.asarray(first.t), sel[next(iter(results))]
+    ref = next(iter(shown), next(iter(results)))
+    t0, s0 = np.asarray(results[ref].t), sel[ref]
     # the reference thin and on top: loops that track it exactly do not hide it
-    a[0].plot(t0[s0], first.x_d[s0], label="desired", zorder=3, **sty.line("desired", lw=0.6))
+    a[0].plot(
+        t0[s0], results[ref].x_d[s0], label="desired", zorder=3, **sty.line("desired", lw=0.6)
+    )
     for label, r in results.items():
         t, s = np.asarray(r.t), sel[label]
-        a[0].plot(t[s], r.x[s, 0], label=label, **sty.line(label))
+        name = label if label in shown else f"{label}: diverged at t = {t[-1]:.3g} s"
+        a[0].plot(t[s], r.x[s, 0], label=name, **sty.line(label))
         if show_input:
-            a[-1].plot(t[s], r.u[s], label=label, **sty.line(label))
+            a[-1].plot(t[s], r.u[s], label=name, **sty.line(label))
     for ax, group in zip(a[1:], groups, strict=False):
         for label in group:
             t, s = np.asarray(results[label].t), sel[label]
