@@ -53,6 +53,39 @@ def test_report_files_and_verdict(built):
     assert "config sha256" in md and load_config(CONFIG).sha256 in md
 
 
+def _md_row(md: str, first_cell: str) -> list[str]:
+    line = next(ln for ln in md.splitlines() if ln.startswith(f"| {first_cell} |"))
+    return [c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]
+
+
+def test_summary_block_quotes_the_report_numbers(built):
+    """The summary at the top: verdict, envelope, loop error, export; the report's own numbers."""
+    md = (built[0].out_dir / "report.md").read_text()
+    cert = json.loads((built[0].out_dir / "certificate.json").read_text())
+    lines = md.splitlines()
+    top = lines.index("## Summary")
+    assert top < lines.index("## Plant")
+    items = ("verdict", "envelope", "tracking (recommended loop)", "export")
+    rows = {r: _md_row(md, r)[1] for r in items}
+    assert rows["verdict"].startswith("**CERTIFIED**: the configured gains (8, 64, -512)")
+    assert f"{cert['configured']['best']}" in rows["verdict"]
+    assert f"\\|u'\\| <= {cert['envelope']['udot_max']:.4g} V/s" in rows["envelope"]
+    best = next(
+        c for c in cert["configured"]["certificates"] if c["name"] == cert["configured"]["best"]
+    )
+    assert f"hold up to {best['max_udot']:.4g} V/s" in rows["envelope"]
+    # the recommended loop's error is the tracking table's PHSO (digital tuning) row
+    maxe = float(_md_row(md, "PHSO (digital tuning)")[1])
+    assert f"with the PHSO: MAXE {maxe:.3g} um" in rows["tracking (recommended loop)"]
+    eq12 = float(_md_row(md, "PHSO (eq. 12)")[1])
+    assert (
+        f"eq. 12 with the configured constants: MAXE {eq12:.3g} um"
+        in rows["tracking (recommended loop)"]
+    )
+    cmd = "`bwdesign export-c --config paper_experiment.toml --out fw --tuning digital`"
+    assert cmd in rows["export"]
+
+
 def test_two_runs_are_identical(built):
     a, b = built
     for name in ("report.md", "certificate.json"):
@@ -100,6 +133,15 @@ def test_not_certified_is_a_well_formed_no(tmp_path, capsys):
     cert = json.loads((out / "certificate.json").read_text())
     assert cert["configured"]["certified"] is False
     assert cert["synthesis"]["feasible"] is True
+    # the summary says no, and offers the gains that are certified at this envelope
+    assert _md_row(md, "verdict")[1].startswith("**NOT CERTIFIED**: no tier certifies")
+    export = _md_row(md, "export")[1]
+    assert export.startswith("not the configured gains")
+    gains = "(" + ", ".join(f"{g:.6g}" for g in cert["synthesis"]["gains"]) + ")"
+    assert "`bwdesign export-c --config fast.toml --out fw --synthesize`" in export
+    assert f"the synthesised gains {gains}, certified at" in export
+    html = (out / "report.html").read_text()
+    assert '<p id="verdict" class="verdict not-certified"' in html
 
 
 GOOD = CONFIG.read_text()

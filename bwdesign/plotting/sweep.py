@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from .figures import _COLORS, _figure
+from .styles import legend, new_figure, series_style
 
 __all__ = ["plot_sweep_histograms"]
 
@@ -32,7 +32,7 @@ def plot_sweep_histograms(
     -------
     fig, axes
     """
-    fig, axes = _figure(1, len(metrics), figsize=(4.0 * len(metrics), 3.4))
+    fig, axes = new_figure(1, len(metrics), figsize=(4.0 * len(metrics), 3.4))
     observers = list(dict.fromkeys(table["observer"].tolist()))
     for ax, m in zip(axes[0], metrics, strict=True):
         vals = [table[m][(table["observer"] == o) & table["stable"]] for o in observers]
@@ -43,10 +43,12 @@ def plot_sweep_histograms(
         lo, hi = float(finite.min()), float(finite.max())
         bins = np.linspace(lo, hi if hi > lo else lo + 1e-12, 31)
         for o, v in zip(observers, vals, strict=True):
-            ax.hist(v, bins=bins, alpha=0.55, color=_COLORS.get(o.upper()), label=o.upper())
+            ax.hist(
+                v, bins=bins, alpha=0.55, color=series_style(o.upper())["color"], label=o.upper()
+            )
         ax.set_xlabel(f"{m.upper()} ({length_unit})")
         ax.set_ylabel("scenarios")
-        ax.legend(fontsize=8)
+        legend(ax, outside=False)
     if title:
         fig.suptitle(title)
     return fig, axes

@@ -54,8 +54,20 @@ class Document:
         self.blocks.append(("p", text))
 
     def callout(self, text: str) -> None:
-        """A highlighted paragraph (verdicts at the top of a report)."""
+        """A highlighted paragraph (a note that is not a verdict)."""
         self.blocks.append(("callout", text))
+
+    def verdict(self, text: str, ok: bool) -> None:
+        """The verdict at the top: green in HTML when ``ok``, red when not (``id="verdict"``)."""
+        self.blocks.append(("verdict", (text, bool(ok))))
+
+    def summary(self, rows: list[list[str]]) -> None:
+        """A short item/value block read before the rest (``id="summary"`` in HTML)."""
+        self.blocks.append(("summary", [list(map(str, r)) for r in rows]))
+
+    def insert(self, at: int, other: Document) -> None:
+        """Put ``other``'s blocks before block ``at`` (e.g. a summary built at the end)."""
+        self.blocks[at:at] = other.blocks
 
     def bullets(self, items: list[str]) -> None:
         self.blocks.append(("ul", list(items)))
@@ -80,6 +92,11 @@ class Document:
                 out += [data, ""]
             elif kind == "callout":
                 out += [f"> **{data}**", ""]
+            elif kind == "verdict":
+                out += [f"> **{data[0]}**", ""]
+            elif kind == "summary":
+                out += ["## Summary", "", "| item | value |", "|---|---|"]
+                out += [f"| {_cell(k)} | {_cell(v)} |" for k, v in data] + [""]
             elif kind == "ul":
                 out += [f"- {item}" for item in data] + [""]
             elif kind == "table":
@@ -106,6 +123,21 @@ class Document:
                 body.append(f"<p>{_inline(data)}</p>")
             elif kind == "callout":
                 body.append(f'<p class="callout">{_inline(data)}</p>')
+            elif kind == "verdict":
+                text, ok = data
+                cls = "certified" if ok else "not-certified"
+                body.append(
+                    f'<p id="verdict" class="verdict {cls}" role="status">{_inline(text)}</p>'
+                )
+            elif kind == "summary":
+                trs = "".join(
+                    f'<tr><th scope="row">{_inline(k)}</th><td>{_inline(v)}</td></tr>'
+                    for k, v in data
+                )
+                body.append(
+                    f'<section id="summary"><h2>Summary</h2><table class="summary">'
+                    f"<tbody>{trs}</tbody></table></section>"
+                )
             elif kind == "ul":
                 body.append("<ul>" + "".join(f"<li>{_inline(i)}</li>" for i in data) + "</ul>")
             elif kind == "table":
@@ -116,7 +148,8 @@ class Document:
                     "<tr>" + "".join(f"<td>{_inline(c)}</td>" for c in r) + "</tr>" for r in rows
                 )
                 body.append(
-                    f"<table{attr}><thead><tr>{head}</tr></thead><tbody>{trs}</tbody></table>"
+                    f'<div class="table-wrap"><table{attr}><thead><tr>{head}</tr></thead>'
+                    f"<tbody>{trs}</tbody></table></div>"
                 )
             elif kind == "fig":
                 path, caption = data
@@ -167,15 +200,23 @@ _PAGE = """<!DOCTYPE html>
 <style>
 body {{ font-family: system-ui, sans-serif; max-width: 60rem; margin: 2rem auto;
        padding: 0 1rem; line-height: 1.45; color: #222; }}
+.table-wrap {{ max-width: 100%; overflow-x: auto; }}
 table {{ border-collapse: collapse; margin: 1rem 0; font-size: 0.92rem; }}
 th, td {{ border: 1px solid #bbb; padding: 0.25rem 0.5rem; text-align: left; }}
 th {{ background: #eee; }}
 figure {{ margin: 1rem 0; }}
-figure img {{ max-width: 100%; }}
+figure img {{ max-width: 100%; height: auto; }}
 figcaption {{ font-style: italic; font-size: 0.9rem; }}
-pre {{ background: #f5f5f5; padding: 0.5rem; overflow-x: auto; }}
-code {{ background: #f5f5f5; padding: 0 0.2rem; }}
+pre {{ background: #f5f5f5; padding: 0.5rem; white-space: pre-wrap;
+      overflow-wrap: anywhere; overflow-x: auto; }}
+code {{ background: #f5f5f5; padding: 0 0.2rem; overflow-wrap: anywhere; }}
 .callout {{ border-left: 4px solid #c60; padding: 0.5rem 1rem; background: #fff6ee; }}
+.verdict {{ border-left: 8px solid; padding: 0.75rem 1rem; font-size: 1.05rem; }}
+.verdict.certified {{ border-color: #1b7f3b; background: #e3f4e8; color: #0d3d1c; }}
+.verdict.not-certified {{ border-color: #b3261e; background: #fbe4e2; color: #5c0f0a; }}
+#summary h2 {{ margin-bottom: 0.25rem; }}
+table.summary {{ width: 100%; }}
+table.summary th {{ width: 14rem; vertical-align: top; }}
 </style>
 </head>
 <body>

@@ -54,7 +54,10 @@ def identification_document(
             else "Every parameter determined."
         )
     )
-    doc.callout(verdict if result.converged else f"DID NOT CONVERGE: {result.reason}. {verdict}")
+    doc.verdict(
+        verdict if result.converged else f"DID NOT CONVERGE: {result.reason}. {verdict}",
+        ok=result.converged and not bad,
+    )
     if stage_file:
         doc.para(
             f"Stage file: `{stage_file}` ([plant], [sampling], [uncertainty] with these 95 % "

@@ -44,6 +44,10 @@ __all__ = [
     "OBSERVERS",
 ]
 
+#: Decades below each state's largest estimation error that the figure shows
+#: (double-precision rounding of the states lies about 15 decades below them).
+ESTIMATION_DECADES = 12
+
 #: The observers of the report's runs, in table order.
 OBSERVERS = ("phso", "eso", "phdo")
 
@@ -275,14 +279,23 @@ def tracking_section(doc: Any, config: StageConfig, runs: list[TrackingRun], fig
     plotting.save_figure(fig, figs / "tracking.png")
     doc.figure("figures/tracking.png", "Tracking, error and input over the metrics window")
     curves = {}
+    panels = {
+        "x1 displacement": f"|x1hat - x1| ({lu})",
+        "x2 velocity": f"|x2hat - x2| ({lu}/s)",
+        "x3 hysteresis": f"|x3hat - x3| ({lu})",
+    }
     for label, r in runs_by_label.items():
         if r.stable:
             err = np.asarray(r.xhat) - np.asarray(r.x)
-            for i in range(3):
-                curves[f"x{i + 1} | {label}"] = (np.asarray(r.t), err[:, i])
+            for i, panel in enumerate(panels):
+                curves[f"{panel} | {label}"] = (np.asarray(r.t), err[:, i])
     if curves:
         fig, _ = plotting.plot_estimation_errors(
-            curves, title="estimation errors in the loop", ylabel=f"|x_hat - x| ({lu}, {lu}/s)"
+            curves,
+            title="estimation errors in the loop",
+            ylabel=panels,
+            stack=True,
+            decades=ESTIMATION_DECADES,
         )
         plotting.save_figure(fig, figs / "estimation_errors.png")
         doc.figure("figures/estimation_errors.png", "Estimation error of each state in the loop")
