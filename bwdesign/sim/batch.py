@@ -237,7 +237,10 @@ def simulate_batch(
     if not isinstance(params, BoucWenParams):
         raise InputError(f"params must be a BoucWenParams, got {type(params).__name__}")
     if not isinstance(reference, Reference):
-        raise InputError(f"reference must be a Sine, Triangle or Step, got {reference!r}")
+        raise InputError(
+            "reference must be a bwdesign Reference (Sine, Triangle, Step or a subclass), "
+            f"got {reference!r}"
+        )
     if observer not in BATCH_OBSERVERS:
         raise InputError(f"batched observers are {', '.join(BATCH_OBSERVERS)}, got {observer!r}")
     if not isinstance(controller, TrackingController):

@@ -367,7 +367,10 @@ def simulate(
     if not isinstance(params, BoucWenParams):
         raise InputError(f"params must be a BoucWenParams, got {type(params).__name__}")
     if not isinstance(reference, Reference):
-        raise InputError(f"reference must be a Sine, Triangle or Step, got {reference!r}")
+        raise InputError(
+            "reference must be a bwdesign Reference (Sine, Triangle, Step or a subclass), "
+            f"got {reference!r}"
+        )
     tp = params if true_params is None else true_params
     if not isinstance(tp, BoucWenParams):
         raise InputError("true_params must be a BoucWenParams")

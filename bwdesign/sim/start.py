@@ -44,7 +44,10 @@ def start_on_reference(params: BoucWenParams, reference: Reference) -> dict[str,
     if not isinstance(params, BoucWenParams):
         raise InputError(f"params must be a BoucWenParams, got {type(params).__name__}")
     if not isinstance(reference, Reference):
-        raise InputError(f"reference must be a Sine, Triangle or Step, got {reference!r}")
+        raise InputError(
+            "reference must be a bwdesign Reference (Sine, Triangle, Step or a subclass), "
+            f"got {reference!r}"
+        )
     xd0, vd0, ad0 = (float(np.asarray(a)) for a in reference.evaluate(0.0))
     return dict(
         x0=[xd0, vd0, 0.0],
