@@ -51,7 +51,7 @@ from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import check_gains, disturbance_gains_from
+from ..observers.gains import check_gains, gains_for_observer
 from .batch import BatchResult, simulate_batch
 from .start import start_on_reference
 
@@ -328,8 +328,7 @@ def synthesize_robust(
     results: list[tuple[dict[str, Any], RobustCertificate | None]] = []
     iu = params.input_unit
     for c in cands:
-        if observer == "phdo":
-            c["gains"] = disturbance_gains_from(c["gains"])
+        c["gains"] = gains_for_observer(observer, c["gains"])
         c.update(_corners(params, uncertainty, reference, tuning.dt, c, delay, observer))
         c.update(holds=False, tracking_bound=None, estimation_bound=None, envelope=None)
         c["x3_estimation_bound"] = None
