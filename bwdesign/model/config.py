@@ -37,7 +37,7 @@ from .params import PRESETS, BoucWenParams, preset
 from .plant import check_sample_time
 from .references import Reference, reference_from_dict
 from .requirements import parse_requirements
-from .stage_presets import resolve_config, stage_presets
+from .stage_presets import resolve_config, stage_presets, unknown_plant_message
 from .uncertainty import UncertaintyBox
 
 __all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant"]
@@ -393,9 +393,9 @@ def load_plant(name_or_path: str | Path) -> BoucWenParams:
     """
     if isinstance(name_or_path, str) and name_or_path in PRESETS:
         return preset(name_or_path)
-    if not str(name_or_path).strip():
-        return preset("")  # raises the "unknown preset" error, listing the presets
     p = Path(name_or_path)
-    if p.suffix.lower() != ".toml" and not p.exists() and str(p) not in stage_presets():
-        return preset(str(name_or_path))  # raises the "unknown preset" error
+    if not str(name_or_path).strip() or (
+        p.suffix.lower() != ".toml" and not p.exists() and str(p) not in stage_presets()
+    ):
+        raise ConfigError(unknown_plant_message(str(name_or_path)))
     return load_config(p).plant
