@@ -354,6 +354,16 @@ def _comment(
     return "\n".join(" * " + line for line in lines)
 
 
+def _udot_max_comment(summary: dict[str, Any]) -> str:
+    """The header's line on UDOT_MAX: "certified" only when the export is."""
+    if summary["certified"]:
+        return "The input-rate bound |u'| (V/s) the observer gains are certified for."
+    return (
+        "The input-rate bound |u'| (V/s) asked for (the stage's envelope); the exported gains "
+        "are NOT certified for it (exported with --allow-uncertified)."
+    )
+
+
 def c_sources(
     config: StageConfig,
     *,
@@ -482,6 +492,7 @@ def c_sources(
         summary=comment,
         dt=lit(dt),
         udot_max=lit(udot_max),
+        udot_max_comment=_udot_max_comment(summary),
         du_max=lit(udot_max * dt),
         length_unit=params.length_unit,
         input_unit=params.input_unit,
