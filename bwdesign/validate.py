@@ -33,6 +33,7 @@ __all__ = [
     "integer",
     "parse_real",
     "parse_integer",
+    "below_nyquist",
     "DT",
     "UDOT_MAX",
     "DECAY",
@@ -174,6 +175,44 @@ def parse_integer(
     except ValueError:
         raise _fail(error, f"{name} must be an integer, got {text!r}", name) from None
     return integer(value, name, within=within, error=error)
+
+
+def below_nyquist(
+    reference: Any,
+    dt: float,
+    *,
+    what: str = "the reference",
+    error: type[BWDesignError] = InputError,
+) -> None:
+    """Refuse a periodic reference at or above the Nyquist frequency ``1/(2 dt)``.
+
+    A loop sampled every ``dt`` cannot follow a reference whose fundamental
+    ``1/period`` reaches ``1/(2 dt)``: the samples alias it to a lower frequency
+    (at exactly ``1/(2 dt)`` a sine may be sampled at its zero crossings), and a
+    simulation of it only "diverges". Checked wherever a reference meets a sample
+    time. A reference without a period (a step) passes.
+
+    Parameters
+    ----------
+    reference : Reference
+        Anything with a ``period`` (s) or ``None``.
+    dt : float
+        Sample time (s), already checked.
+    what : str
+        Name of the reference in the message.
+    error : type
+        Error class raised.
+    """
+    period = getattr(reference, "period", None)
+    if not period:
+        return
+    f, nyquist = 1.0 / float(period), 1.0 / (2.0 * float(dt))
+    if f >= nyquist:
+        raise error(
+            f"{what} frequency {f:g} Hz is at or above the Nyquist frequency 1/(2 dt) = "
+            f"{nyquist:g} Hz of dt = {float(dt):g} s: the sampled loop cannot follow it "
+            "(lower the frequency or shorten dt)"
+        )
 
 
 #: Sample time (s). The plant adds its own bound (see ``bwdesign.model.plant``).

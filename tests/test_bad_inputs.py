@@ -24,7 +24,12 @@ import pytest
 
 from bwdesign import BoucWenParams, Sine, certify, preset, simulate, synthesize
 from bwdesign.cli.main import main
+from bwdesign.control.controllers import TrackingController
 from bwdesign.errors import ConfigError, InputError, ParameterError
+from bwdesign.identify import IdentificationData, load_data
+from bwdesign.identify.excite import design_excitation
+from bwdesign.model.config import load_config
+from bwdesign.sim import simulate_batch
 from bwdesign.validate import DT, SEED, integer, parse_real, real
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -128,6 +133,35 @@ SWEEP = [
     "3",
 ]
 SWEPT = GOOD_TOML + "[uncertainty]\na1 = { rel = 0.02 }\n\n[sweep]\nsamples = 4\n"
+
+
+def _record(*, u: float | None = None, y: float | None = None, dt: float = 1e-3):
+    """A record ``rec.csv`` (400 samples) with u = +-u (alternating) or y = y when given."""
+
+    def make(tmp: Path) -> None:
+        k = np.arange(400)
+        uu = np.where(k % 2, u, -u) if u is not None else 5 + 4 * np.sin(0.05 * k)
+        yy = np.full(400, y) if y is not None else 1.4 * uu
+        rows = "\n".join(
+            f"{i * dt!r},{a!r},{b!r}"
+            for i, a, b in zip(k.tolist(), uu.tolist(), yy.tolist(), strict=True)
+        )
+        (tmp / "rec.csv").write_text("t,u,y\n" + rows + "\n")
+
+    return make
+
+
+def _with_record(setup: Callable[[Path], None]) -> Callable[[Path], None]:
+    def make(tmp: Path) -> None:
+        setup(tmp)
+        _record()(tmp)
+
+    return make
+
+
+IDENT = ["identify", "--data", "rec.csv", "--out", "id.toml", "--quiet"]
+EXCITE = ["excite", "--plant", "paper_experiment", "--umin", "0", "--umax", "120"]
+EXCITE += ["--udot-max", "1e-6", "--duration", "1", "--dt", "1e-3", "--out", "e.csv"]
 STAGE = ["--plant", "stage.toml"]
 CERT_STAGE = ["certify", *STAGE, *GAINS, "--udot-max", "361"]
 ENV = "from_reference = true\nmargin = 1.1"
@@ -275,6 +309,50 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         _stage(SWEPT.replace("samples = 4", "samples = 100000000")),
         "at most",
     ),
+    # -- issue 24: edges a new user hit ----------------------------------------------
+    (
+        "check exit 2 writes no JUnit file",
+        ["check", "stage.toml", "--junit-xml", "r.xml"],
+        _replace("[observer]\ngains = [8.0, 64.0, -512.0]", ""),
+        "needs [observer] gains",
+    ),  # fmt: skip
+    ("identify u = +-1e300", IDENT, _record(u=1e300), "u at data row 1 (V) = -1e+300 is outside"),
+    ("identify y = 1e300", IDENT, _record(y=1e300), "y at data row 1"),
+    ("identify dt = 1e-16", IDENT, _record(dt=1e-16), "sample time dt (s) = 1e-16 is outside"),
+    ("identify --data a directory", [*IDENT[:2], "mydir", *IDENT[3:]], _user_dir, "is a directory"),
+    (
+        "identify --report a user's dir",
+        [*IDENT, "--report", "mydir"],
+        _with_record(_user_dir),
+        "pass --force",
+    ),  # fmt: skip
+    ("identify --force without --report", [*IDENT, "--force"], _record(), "applies to --report"),
+    (
+        "TOML nested 3000 deep",
+        ["params", *STAGE],
+        _stage(PLANT + "x = " + "[" * 3000 + "]" * 3000),
+        "nested too deeply",
+    ),  # fmt: skip
+    (
+        "simulate above Nyquist",
+        sim(frequency="3000"),
+        None,
+        "frequency 3000 Hz is at or above the Nyquist frequency 1/(2 dt) = 2500 Hz",
+    ),  # fmt: skip
+    ("simulate at Nyquist", sim(frequency="2500"), None, "at or above the Nyquist frequency"),
+    (
+        "report reference above Nyquist",
+        REPORT,
+        _replace("frequency = 1.0", "frequency = 2600.0"),
+        "[reference] frequency 2600 Hz is at or above the Nyquist frequency",
+    ),  # fmt: skip
+    ("excite --udot-max 1e-6", EXCITE, None, "below the smallest usable 786 V/s"),
+    (
+        "--plant error lists every preset",
+        ["params", "--plant", "no_such_stage"],
+        None,
+        "paper_simulation, paper_simulation_corrected, stack_actuator_800hz",
+    ),
 ]
 
 
@@ -381,6 +459,38 @@ PYTHON = [
     ("seed True", lambda: simulate(P, SINE, **LOOP, seed=True), InputError, "must be an integer"),
     ("amplitude 1e300", lambda: Sine(amplitude=1e300, frequency=1.0), ConfigError, "range"),
     ("gains str", lambda: certify(P, ("8", 64, -512), udot_max=361), ValueError, "numbers"),
+    (
+        "simulate above Nyquist",
+        lambda: simulate(P, Sine(amplitude=1.0, frequency=3000.0), **LOOP),
+        InputError,
+        r"Nyquist frequency 1/\(2 dt\) = 2500 Hz",
+    ),
+    (
+        "simulate_batch above Nyquist",
+        lambda: simulate_batch(
+            P,
+            Sine(amplitude=1.0, frequency=2500.0),
+            [P],
+            controller=TrackingController(P, 1.0, 2.0),
+            **{k: v for k, v in LOOP.items() if k not in ("lambda1", "lambda2")},
+        ),
+        InputError,
+        "at or above the Nyquist frequency",
+    ),
+    (
+        "record dt 1e-16",
+        lambda: IdentificationData.from_arrays(
+            np.arange(400) * 1e-16, np.sin(np.arange(400.0)), np.cos(np.arange(400.0))
+        ),
+        InputError,
+        r"dt \(s\) = 1e-16 is outside the supported range \[1e-09, 1\] s",
+    ),
+    (
+        "excite below the smallest rate",
+        lambda: design_excitation(P, umin=0.0, umax=120.0, udot_max=1e-6, duration=1.0, dt=1e-3),
+        InputError,
+        "below the smallest usable",
+    ),
 ]
 
 
@@ -408,3 +518,29 @@ def test_validate_semantics():
     with pytest.raises(ParameterError) as info:
         real(-1.0, "owner: a2", within=DT, error=ParameterError)
     assert info.value.field == "a2"
+
+
+# -- accepted as written: what spreadsheet programs and editors produce (issue 24) ----
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path):
+    """A UTF-8 BOM at the start of a stage file or a CSV record reads as without it."""
+    plain, bom = tmp_path / "plain.toml", tmp_path / "bom.toml"
+    plain.write_text(GOOD_TOML)
+    bom.write_bytes(b"\xef\xbb\xbf" + GOOD_TOML.encode())
+    a, b = load_config(plain), load_config(bom)
+    assert (a.plant, a.gains, a.dt, a.reference) == (b.plant, b.gains, b.dt, b.reference)
+    _record()(tmp_path)
+    text = (tmp_path / "rec.csv").read_text()
+    (tmp_path / "bom.csv").write_text(text, encoding="utf-8-sig")
+    assert (tmp_path / "bom.csv").read_bytes().startswith(b"\xef\xbb\xbft,u,y")
+    x, y = load_data(tmp_path / "rec.csv"), load_data(tmp_path / "bom.csv")
+    assert np.array_equal(x.u, y.u) and np.array_equal(x.y, y.y) and x.dt == y.dt
+
+
+def test_simulate_batch_is_public_in_bwdesign_sim():
+    import bwdesign.sim
+
+    assert (
+        "simulate_batch" in bwdesign.sim.__all__ and bwdesign.sim.simulate_batch is simulate_batch
+    )

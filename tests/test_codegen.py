@@ -331,7 +331,17 @@ def test_uncertified_gains_are_refused(tmp_path, config):
     assert not (tmp_path / "out").exists()
     res = export_c(bad, tmp_path / "out", allow_uncertified=True)
     assert not res.certified
-    assert "NOT CERTIFIED" in (tmp_path / "out" / "bw.h").read_text()
+    header = (tmp_path / "out" / "bw.h").read_text()
+    assert "NOT CERTIFIED" in header
+    # the constant's own comment does not call the bound certified (issue 24)
+    lines = header.splitlines()
+    line = lines[lines.index(f"#define BW_UDOT_MAX ({c_literal(1e5, 'float64')})") - 1]
+    assert "NOT certified for it" in line and "are certified for" not in line
+    good = (tmp_path / "good").joinpath("bw.h")
+    export_c(config, tmp_path / "good")
+    assert "/* The input-rate bound |u'| (V/s) the observer gains are certified for. */" in (
+        good.read_text()
+    )
 
 
 def _stage(tmp_path: Path, text: str) -> str:

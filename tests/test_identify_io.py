@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import tomllib
 
 import numpy as np
@@ -12,7 +13,12 @@ import pytest
 from bwdesign import ConfigError, InputError, ParameterError, UncertaintyBox, load_config, preset
 from bwdesign.cli import main
 from bwdesign.identify import MIN_SAMPLES, load_data
-from bwdesign.identify.excite import design_excitation, simulate_record
+from bwdesign.identify.excite import (
+    RANGE_MARGIN,
+    design_excitation,
+    simulate_record,
+    smallest_rate,
+)
 
 GOOD_T = np.arange(400) * 1e-3
 GOOD_U = 5 + 4 * np.sin(2 * np.pi * 5 * GOOD_T)
@@ -205,7 +211,9 @@ def test_excite_respects_range_and_rate(records, capsys):
     assert text.startswith("# written by bwdesign")
     assert "SIMULATED, NOT MEASURED" in text and "Regenerate: bwdesign excite" in text
     rec = load_data(d / "train.csv")
-    assert rec.u.min() >= 0 and rec.u.max() <= 120
+    # the range asked, to within RANGE_MARGIN of each end (it used 31-90 V of 0-120 V)
+    margin = RANGE_MARGIN * 120
+    assert rec.u.min() == pytest.approx(margin) and rec.u.max() == pytest.approx(120 - margin)
     assert np.max(np.abs(np.diff(rec.u))) / rec.dt <= 2000 * (1 + 1e-9)
     for kind in ("multisine", "triangle-sweep"):
         t, u = design_excitation(
@@ -217,9 +225,33 @@ def test_excite_respects_range_and_rate(records, capsys):
             duration=0.05,
             dt=1e-5,
         )
-        assert (
-            u.min() >= -1 and u.max() <= 7 and np.max(np.abs(np.diff(u))) <= 5e3 * 1e-5 * 1.000001
-        )
+        assert u.min() == pytest.approx(-1 + 8 * RANGE_MARGIN)
+        assert u.max() == pytest.approx(7 - 8 * RANGE_MARGIN)
+        assert np.max(np.abs(np.diff(u))) <= 5e3 * 1e-5 * 1.000001
+
+
+@pytest.mark.parametrize("kind", ["multisine", "triangle-sweep"])
+def test_excite_uses_the_range_down_to_the_smallest_rate(kind):
+    """Seeded random ranges, lengths and rates from the smallest usable one up: the input spans
+    the range to within RANGE_MARGIN of each end, keeps the rate, and below it is refused."""
+    rng = np.random.default_rng(24)
+    plant = preset("paper_experiment")
+    for _ in range(25):
+        lo = rng.uniform(-100, 100)
+        hi = lo + 10 ** rng.uniform(-1, 3)
+        duration, n = 10 ** rng.uniform(-1.5, 0.5), int(10 ** rng.uniform(2.4, 3.7))
+        kw = dict(umin=lo, umax=hi, duration=duration, dt=duration / n)
+        need = smallest_rate(kind=kind, **kw)
+        udot = need * (1 + 10 ** rng.uniform(-4, 2))
+        _, u = design_excitation(plant, kind=kind, udot_max=udot, **kw)
+        m = RANGE_MARGIN * (hi - lo)
+        assert u.min() == pytest.approx(lo + m, abs=1e-9 * (hi - lo))
+        assert u.max() == pytest.approx(hi - m, abs=1e-9 * (hi - lo))
+        assert np.max(np.abs(np.diff(u))) <= udot * kw["dt"] * (1 + 1e-9)
+        with pytest.raises(
+            InputError, match=re.escape(f"below the smallest usable {need:.4g} V/s")
+        ):
+            design_excitation(plant, kind=kind, udot_max=need * 0.999, **kw)
 
 
 def test_identify_command_writes_a_stage_every_command_accepts(records, capsys, tmp_path):
@@ -310,4 +342,8 @@ def test_identify_report(records, capsys, tmp_path):
     foreign.mkdir()
     (foreign / "mine.txt").write_text("keep")
     assert main([*args, "--multistart", "1", "--report", str(foreign)]) == 2
+    assert "pass --force" in capsys.readouterr().err
     assert (foreign / "mine.txt").read_text() == "keep"
+    # --force (which the message names) writes beside the foreign file, never over it
+    assert main([*args, "--multistart", "1", "--report", str(foreign), "--force"]) == 0
+    assert (foreign / "mine.txt").read_text() == "keep" and (foreign / "report.md").is_file()

@@ -21,7 +21,8 @@ from bwdesign.cli.main import main
 from bwdesign.model import config as config_mod
 from bwdesign.model import references
 from bwdesign.model.params import MODEL_FIELDS, PHYSICAL_FIELDS
-from bwdesign.model.stage_presets import STAGES_DIR, resolve_config
+from bwdesign.model.params import PRESETS as PLANT_PRESETS
+from bwdesign.model.stage_presets import STAGES_DIR, preset_catalogue, resolve_config
 from bwdesign.report.certified import DEFAULT_DECAY
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -98,12 +99,36 @@ def test_report_with_an_unknown_preset_is_one_error_line(tmp_path, capsys):
 
 
 def test_presets_command(capsys):
+    """One list: the stage files and the parameter-only presets, each with where it is taken."""
+    names = sorted(set(PRESETS) | set(PLANT_PRESETS))
+    assert [e.name for e in preset_catalogue()] == names
     assert main(["presets"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert [line.split()[0] for line in lines] == PRESETS
+    assert [line.split()[0] for line in lines] == names
+    assert "--plant only; unbounded: refused unless --allow-unbounded" in lines[1]
     assert main(["presets", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert {p["name"]: p["description"] for p in doc["presets"]} == stage_presets()
+    stages = {p["name"]: p["description"] for p in doc["presets"] if p["stage_file"]}
+    assert stages == stage_presets()
+    assert [p["name"] for p in doc["presets"] if not p["bounded"]] == ["paper_simulation"]
+
+
+def test_an_unknown_plant_lists_every_preset(capsys):
+    assert main(["params", "--plant", "no_such_stage"]) == 2
+    err = capsys.readouterr().err
+    names = ", ".join(e.name for e in preset_catalogue())
+    assert err.count("\n") == 1 and f"presets are {names} (bwdesign presets" in err
+    assert "stack_actuator_800hz" in err and "paper_simulation," in err
+
+
+def test_the_readme_presets_table_is_the_catalogue():
+    """The README's table names every preset the command line takes, and no other."""
+    text = (ROOT / "README.md").read_text()
+    table = text[text.index("\nPresets:\n") :].split("\n\n")[1]
+    rows = [ln.split("|")[1].strip().strip("`") for ln in table.splitlines()[2:]]
+    assert rows == [e.name for e in preset_catalogue()]
+    row = next(ln for ln in table.splitlines() if ln.startswith("| `paper_simulation` "))
+    assert "`params` prints it" in row and "unless `--allow-unbounded`" in row
 
 
 # -- the starter file ---------------------------------------------------------
@@ -150,15 +175,38 @@ def test_starter_from_a_preset_loads_back_to_the_preset(name, tmp_path):
     assert _bare(live) == _bare(expected)
 
 
-def test_default_starter_comments_out_the_optional_sections(tmp_path):
+def test_default_starter_is_the_paper_stage_with_its_requirements(tmp_path):
+    """[observer] is active beside [requirements], so the starter passes its own check."""
     text = init_cmd.starter_config()
     cfg = load_config(_write(tmp_path, text))
     paper = load_config("paper_experiment")
-    assert _bare(cfg) == _bare(replace(paper, gains=None))
-    assert re.search(r"^# \[observer\]$", text, re.MULTILINE)
-    assert re.search(r"^# \[synthesis\]$", text, re.MULTILINE)
+    assert _bare(cfg) == _bare(paper)
+    assert re.search(r"^\[observer\]$", text, re.MULTILINE)
+    assert re.search(r"^\[requirements\]$", text, re.MULTILINE)
+    assert re.search(r"^# \[synthesis\]$", text, re.MULTILINE)  # the preset has none
     live = load_config(_write(tmp_path, _uncomment_all(text), "live.toml"))
     assert _bare(live) == _bare(replace(paper, synthesis={"decay": DEFAULT_DECAY}))
+
+
+def test_the_starter_passes_its_own_check(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["init", "stage.toml"]) == 0
+    capsys.readouterr()
+    assert main(["check", "stage.toml", "--junit-xml", "r.xml"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 6 and all(line.startswith("PASS  stage.toml  ") for line in lines)
+    assert Path("r.xml").is_file()
+
+
+def test_check_writes_no_junit_on_exit_2(tmp_path, capsys, monkeypatch):
+    """A starter whose [observer] was removed: exit 2, one error line, no JUnit file."""
+    monkeypatch.chdir(tmp_path)
+    text = init_cmd.starter_config()
+    Path("stage.toml").write_text(text.replace("\n[observer]\n", "\n# [observer]\n# "))
+    assert main(["check", "stage.toml", "--junit-xml", "r.xml"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1 and "needs [observer] gains" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stage.toml"]
 
 
 def test_units_and_defaults_are_stated():

@@ -89,7 +89,18 @@ def test_summary_block_quotes_the_report_numbers(built):
 def test_two_runs_are_identical(built):
     a, b = built
     for name in ("report.md", "certificate.json"):
-        assert (a.out_dir / name).read_bytes() == (b.out_dir / name).read_bytes(), name
+        # the reproducibility command names each run's own --out
+        one = (a.out_dir / name).read_text().replace(str(a.out_dir), "OUT")
+        two = (b.out_dir / name).read_text().replace(str(b.out_dir), "OUT")
+        assert one == two, name
+
+
+def test_the_reproducibility_command_writes_the_same_report(built):
+    """It names the config and --out as given (issue 24: --out was missing)."""
+    first, _ = built
+    md = (first.out_dir / "report.md").read_text()
+    line = next(ln for ln in md.splitlines() if ln.startswith("| command |"))
+    assert line == f"| command | bwdesign report --config {CONFIG} --out {first.out_dir} |"
 
 
 def _compare(new, old, path=""):

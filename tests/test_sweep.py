@@ -462,6 +462,9 @@ def test_cli_writes_table_and_report(tmp_path, capsys):
         )
     md = (out / "report.md").read_text()
     assert f"assume |u'| <= {udot:.4g} V/s" in md and "replayed with simulate()" in md
+    # the reference as a sentence, not a Python dict (issue 24)
+    md = (out / "report.md").read_text()
+    assert "; sine 80 sin(2 pi 1 t) + 100; " in md and "{'kind'" not in md
 
 
 def test_missing_extra_names_it(tmp_path, capsys, monkeypatch):

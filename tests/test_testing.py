@@ -165,3 +165,85 @@ def test_bundled_stages_meet_their_requirements(capsys):
     out = capsys.readouterr().out.strip().splitlines()
     assert len(out) == 14 and all(line.startswith("PASS  ") for line in out)
     assert any("worst of nominal and 64 corners" in line for line in out)
+
+
+# -- gains that are not Hurwitz are a "no", not bad input (issue 24, item 4) ----------
+
+#: l3 of the wrong sign: A = A0 - l C is not Hurwitz (l3 a1 < 0 is violated)
+NOT_HURWITZ = "gains = [2286.2, 1208283.0, 6256.75]"
+
+
+def test_check_fails_on_gains_that_are_not_hurwitz(tmp_path, capsys):
+    bad = _stage_with(tmp_path, "gains = [2286.2, 1208283.0, -6256.75]", NOT_HURWITZ)
+    xml = tmp_path / "r.xml"
+    assert main(["check", str(bad), "--junit-xml", str(xml)]) == 1
+    out, err = capsys.readouterr()
+    lines = out.strip().splitlines()
+    assert (
+        err == "" and len(lines) == 6 and all(ln.startswith("FAIL  stage.toml  ") for ln in lines)
+    )
+    assert re.search(r"^FAIL  stage\.toml  certified: no certificate: .* not Hurwitz", out, re.M)
+    assert "l3 a1 < 0 (l3 must be negative)" in lines[0]
+    suite = ET.parse(xml).getroot().find("testsuite")
+    assert suite.get("failures") == "6" and suite.get("errors") == "0"
+
+
+def test_assert_certified_on_gains_that_are_not_hurwitz(tmp_path):
+    bad = _stage_with(tmp_path, "gains = [2286.2, 1208283.0, -6256.75]", NOT_HURWITZ)
+    with pytest.raises(AssertionError) as info:
+        assert_certified(bad)
+    msg = str(info.value)
+    assert msg.splitlines()[0] == "stage.toml: gains not certified"
+    assert re.search(r"FAIL\s+certified\s+any\s+None\s+no certificate: .*not Hurwitz", msg)
+    with pytest.raises(AssertionError, match=r"FAIL\s+max_me_um\s+1\s+None\s+not simulated"):
+        assert_tracks(bad, max_me=1.0)
+
+
+def test_plugin_reports_gains_that_are_not_hurwitz_as_failed_items(tmp_path):
+    _stage_with(tmp_path, "gains = [2286.2, 1208283.0, -6256.75]", NOT_HURWITZ)
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", PYTHONPATH=str(ROOT))
+    res = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rf"]
+        + ["--bwdesign-configs", "stage.toml"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert re.search(r"\b6 failed\b", res.stdout) and "error" not in res.stdout.split("\n")[-2]
+    assert "Traceback" not in res.stdout and "GainError" not in res.stdout
+    assert "stage.toml: gains are certified: no certificate: observer gains" in res.stdout
+
+
+# -- the PHDO's gains come from the one map (issue 24, item 5) ------------------------
+
+
+@pytest.mark.skipif(
+    shutil.which("cc") is None and shutil.which("gcc") is None, reason="needs a C compiler"
+)
+@pytest.mark.parametrize("stage", ["paper_experiment", "stack_actuator_800hz"])
+def test_c_matches_python_for_the_phdo(stage):
+    from bwdesign.testing import assert_c_matches_python
+
+    checks = assert_c_matches_python(stage, observer="phdo", steps=2000)
+    assert checks[0].passed and "PHDO C vs Python" in checks[0].text
+
+
+def test_one_map_from_three_state_gains_to_the_phdo():
+    from bwdesign import digital_tuning, export_c, load_config, preset
+    from bwdesign.codegen.export import c_sources
+    from bwdesign.observers.gains import disturbance_gains_from, gains_for_observer
+
+    g = (8.0, 64.0, -512.0)
+    assert gains_for_observer("phdo", g) == disturbance_gains_from(g) == (8.0, 64.0, 0.0, -512.0)
+    assert gains_for_observer("phso", g) == gains_for_observer("eso", g) == g
+    with pytest.raises(ValueError, match="observer must be one of"):
+        gains_for_observer("ukf", g)
+    tune = digital_tuning(preset("paper_experiment"), 2e-4)
+    assert tune.observer_gains_for("phdo") == gains_for_observer("phdo", tune.gains)
+    config = load_config("paper_experiment")
+    doc = c_sources(config)[3]
+    assert tuple(doc["observers"]["phdo"]["gains"]) == gains_for_observer("phdo", config.gains)
+    assert callable(export_c)

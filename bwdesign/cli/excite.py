@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from .._version import __version__
-from ..identify.excite import KINDS, design_excitation, simulate_record
+from ..identify.excite import KINDS, RANGE_MARGIN, design_excitation, simulate_record
 from ..model.config import load_plant
 from ..output.files import prepare_file
 from ..output.jsonenc import dump_json
@@ -27,7 +27,14 @@ def excite_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--kind", choices=KINDS, default="multisine")
     p.add_argument("--umin", required=True, type=finite_float, metavar="V", help="amplifier min")
     p.add_argument("--umax", required=True, type=finite_float, metavar="V", help="amplifier max")
-    p.add_argument("--udot-max", required=True, type=positive_float, metavar="V/s")
+    p.add_argument(
+        "--udot-max",
+        required=True,
+        type=positive_float,
+        metavar="V/s",
+        help="rate limit; at least the rate that crosses the range once in --duration (an "
+        "error states it)",
+    )
     p.add_argument("--duration", required=True, type=positive_float, metavar="S")
     p.add_argument("--dt", required=True, type=positive_float, metavar="S", help="sample time")
     p.add_argument("--seed", type=int, default=0)
@@ -72,7 +79,8 @@ def run_excite(args: argparse.Namespace) -> int:
     )
     head = [
         f"# bwdesign {__version__} excite: {args.kind} input for identification,",
-        f"# within [{args.umin:g}, {args.umax:g}] V and |du/dt| <= {args.udot_max:g} V/s.",
+        f"# within [{args.umin:g}, {args.umax:g}] V (spanning it to within "
+        f"{100 * RANGE_MARGIN:g} % of each end) and |du/dt| <= {args.udot_max:g} V/s.",
         "# Units: t s, u V (held over each sample), y um (at the end of each sample).",
     ]
     cols = [t, u]

@@ -38,6 +38,12 @@ def identify_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--name", help="plant name in the stage file (default: the data file's stem)")
     p.add_argument("--out", required=True, metavar="STAGE.toml", help="stage file to write")
     p.add_argument("--report", metavar="DIR", help="write the identification report here")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --report: write into a directory holding other files (they are kept, never "
+        "overwritten), as report --force",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
@@ -50,9 +56,13 @@ def run_identify(args: argparse.Namespace) -> int:
     if args.multistart < 1 or args.max_nfev < 1:
         raise UsageError("--multistart and --max-nfev must be >= 1")
     target = prepare_file(out, command="identify", what="--out")
+    if args.force and not args.report:
+        raise UsageError("--force applies to --report DIR only (a stage file is never overwritten)")
     report = None
     if args.report:
-        report = prepare_directory(args.report, command="identify --report", what="--report")
+        report = prepare_directory(
+            args.report, command="identify --report", force=args.force, what="--report"
+        )
     data = load_data(args.data, columns=args.columns)
     valid = load_data(args.validate, columns=args.columns) if args.validate else None
     fixed = tuple(f.strip() for f in args.fixed.split(",")) if args.fixed else ()

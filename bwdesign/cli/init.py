@@ -3,10 +3,11 @@
 ``init`` writes a commented starter stage configuration: every section the
 package reads, each key with its unit and default, the values of a bundled
 stage configuration (``paper_experiment`` unless ``--preset`` names another).
-Without ``--preset`` the optional sections ([observer], [synthesis]) are written
-commented out, so the report synthesises gains for the new stage; with
-``--preset`` every section the preset has is active. The file loads with
-:func:`bwdesign.load_config` and ``bwdesign report --config STAGE.toml`` runs on it.
+Every section the preset has is active, its ``[observer]`` gains and
+``[requirements]`` included, so the starter passes its own ``bwdesign check``;
+a section the preset lacks ([synthesis], [uncertainty], ...) is written
+commented out. The file loads with :func:`bwdesign.load_config`, and
+``bwdesign report --config STAGE.toml`` and ``bwdesign check STAGE.toml`` run on it.
 """
 
 from __future__ import annotations
@@ -22,7 +23,12 @@ from ..certify.synthesis import default_pole_radius
 from ..errors import ConfigError
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.requirements import REQUIREMENT_KEYS, SETTING_KEYS
-from ..model.stage_presets import stage_preset_path, stage_presets
+from ..model.stage_presets import (
+    PresetEntry,
+    preset_catalogue,
+    stage_preset_path,
+    stage_presets,
+)
 from ..output.files import prepare_file
 from ..output.jsonenc import dump_json
 from .args import EXIT_OK
@@ -119,7 +125,8 @@ _REFERENCE_KEYS = {
 }
 _HEADINGS = {
     "plant": "the actuator model (required)",
-    "observer": "observer gains to certify (optional; without it the report synthesises only)",
+    "observer": "gains the report certifies and `bwdesign check` checks (optional: without it, "
+    "synthesis only)",
     "controller": "the tracking controller, paper eq. (12) (the report needs it)",
     "sampling": "the sample rate (the report needs it)",
     "envelope": "the input-rate envelope |u'| <= udot_max the certificates hold for",
@@ -217,8 +224,8 @@ def starter_config(preset: str | None = None) -> str:
     ----------
     preset : str, optional
         Bundled stage configuration whose values fill the file (every section
-        it has is active). Default: ``paper_experiment`` with the optional
-        sections [observer] and [synthesis] commented out.
+        it has is active, so the file passes its own ``bwdesign check``).
+        Default: ``paper_experiment``.
 
     Raises
     ------
@@ -228,7 +235,6 @@ def starter_config(preset: str | None = None) -> str:
     name = preset or DEFAULT_PRESET
     source = stage_preset_path(name)
     data = tomllib.loads(source.read_text(encoding="utf-8"))
-    optional = set() if preset else {"observer", "synthesis"}
     lines = [
         "# bwdesign stage configuration: one file per stage.",
         f"# Written by `bwdesign init` (bwdesign {__version__}) with the values of the bundled",
@@ -243,7 +249,7 @@ def starter_config(preset: str | None = None) -> str:
     ]
     for section in _SECTION_ORDER:
         table = data.get(section, {})
-        active = section in data and section not in optional
+        active = section in data
         lines += ["", f"# [{section}]: {_HEADINGS[section]}"]
         if section == "plant":
             body = _plant(table)
@@ -270,8 +276,8 @@ def init_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--preset",
         metavar="NAME",
-        help=f"bundled stage configuration to start from (default {DEFAULT_PRESET}, with the "
-        "optional sections commented out); see `bwdesign presets`",
+        help=f"bundled stage configuration to start from (default {DEFAULT_PRESET}); see "
+        "`bwdesign presets`",
     )
 
 
@@ -286,12 +292,28 @@ def presets_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON document")
 
 
+def _use(entry: PresetEntry) -> str:
+    """Where a preset's name is taken, and whether design commands refuse it."""
+    where = "--plant, --config, init --preset" if entry.stage_file else "--plant only"
+    return where if entry.bounded else f"{where}; unbounded: refused unless --allow-unbounded"
+
+
 def run_presets(args: argparse.Namespace) -> int:
-    presets = stage_presets()
+    presets = preset_catalogue()
     if args.json:
-        print(dump_json({"presets": [{"name": k, "description": v} for k, v in presets.items()]}))
+        doc = [
+            {
+                "name": e.name,
+                "description": e.description,
+                "stage_file": e.stage_file,
+                "bounded": e.bounded,
+                "use": _use(e),
+            }
+            for e in presets
+        ]
+        print(dump_json({"presets": doc}))
         return EXIT_OK
-    width = max(map(len, presets))
-    for name, description in presets.items():
-        print(f"{name:<{width}}  {description}")
+    width = max(len(e.name) for e in presets)
+    for e in presets:
+        print(f"{e.name:<{width}}  {e.description} [{_use(e)}]")
     return EXIT_OK

@@ -139,7 +139,8 @@ COMMANDS: list[Command] = [
     ),
     (
         "presets",
-        "list the bundled stage configs (for --config NAME and init --preset NAME)",
+        "list the presets: bundled stage configs (--plant, --config, init --preset) and parameter "
+        "sets (--plant)",
         _lazy("cli.init", "presets_args"),
         _lazy("cli.init", "run_presets"),
     ),

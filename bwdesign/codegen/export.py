@@ -57,7 +57,7 @@ from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.plant import discretize
 from ..observers.base import _SampledObserver
-from ..observers.gains import disturbance_gains_from
+from ..observers.gains import gains_for_observer
 from ..observers.sampled import (
     DisturbanceHysteresisObserver,
     ExtendedStateObserver,
@@ -167,7 +167,7 @@ def _phdo_gains(params, source, dt, udot_max, gains, K, tune) -> _PhdoGains:
     whole lumped correction goes to ``d`` (``l3 = 0``):
 
     - ``config``: the config's ``[observer]`` gains as ``(l1, l2, 0, l3)``
-      (:func:`bwdesign.observers.gains.disturbance_gains_from`, as ``bwdesign sweep`` runs
+      (:func:`bwdesign.observers.gains.gains_for_observer`, as ``bwdesign sweep`` runs
       the PHDO from a stage file);
     - ``digital``: ``DigitalTuning.observer_gains_for("phdo")`` (the same form of the
       tuning's gains, as ``simulate --observer phdo --tuning digital``);
@@ -192,17 +192,16 @@ def _phdo_gains(params, source, dt, udot_max, gains, K, tune) -> _PhdoGains:
     if gains is not None:
         return _phdo_certified(
             params,
-            disturbance_gains_from(gains),
+            gains_for_observer("phdo", gains),
             None,
             udot_max,
             dt,
             f"{what} in the lumped form (l1, l2, 0, l3)",
         )
-    k1, k2, k3 = K
     return _phdo_certified(
         params,
         None,
-        (k1, k2, 0.0, k3),
+        gains_for_observer("phdo", K),
         udot_max,
         dt,
         f"{what} K in the lumped form (k1, k2, 0, k3)",
@@ -355,6 +354,16 @@ def _comment(
     return "\n".join(" * " + line for line in lines)
 
 
+def _udot_max_comment(summary: dict[str, Any]) -> str:
+    """The header's line on UDOT_MAX: "certified" only when the export is."""
+    if summary["certified"]:
+        return "The input-rate bound |u'| (V/s) the observer gains are certified for."
+    return (
+        "The input-rate bound |u'| (V/s) asked for (the stage's envelope); the exported gains "
+        "are NOT certified for it (exported with --allow-uncertified)."
+    )
+
+
 def c_sources(
     config: StageConfig,
     *,
@@ -483,6 +492,7 @@ def c_sources(
         summary=comment,
         dt=lit(dt),
         udot_max=lit(udot_max),
+        udot_max_comment=_udot_max_comment(summary),
         du_max=lit(udot_max * dt),
         length_unit=params.length_unit,
         input_unit=params.input_unit,

@@ -12,7 +12,7 @@ from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import _check_dt
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import _as_gains, disturbance_gains_from
+from ..observers.gains import _as_gains, gains_for_observer
 from ..validate import Range, integer
 from .analysis import LoopAnalysis, analyze_loop
 from .systems import LoopSystems, _stable, loop_systems
@@ -125,11 +125,7 @@ class DigitalTuning:
         copy runs on the model alone (``l3 = 0``, under which its lumped error
         converges for every input; see :class:`bwdesign.DisturbanceHysteresisObserver`).
         """
-        if observer == "phdo":
-            return disturbance_gains_from(self.gains)
-        if observer not in ("phso", "eso"):
-            raise InputError(f"observer must be 'phso', 'eso' or 'phdo', got {observer!r}")
-        return tuple(self.gains)
+        return gains_for_observer(observer, self.gains)
 
     def controller_kwargs(self, *, observer: str = "phso") -> dict[str, Any]:
         """Keywords for :func:`bwdesign.sim.simulate` (gains, lambdas, form, integral)."""

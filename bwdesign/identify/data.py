@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..validate import DT, SIGNAL, real
 
 __all__ = ["IdentificationData", "load_data", "MIN_SAMPLES", "DT_TOLERANCE"]
 
@@ -61,8 +62,10 @@ class IdentificationData:
         InputError
             Shapes differ, a value is NaN or infinite (the first bad row is
             named), ``t`` is not increasing or not uniform within
-            :data:`DT_TOLERANCE`, fewer than :data:`MIN_SAMPLES` samples, or the
-            input or the output never moves.
+            :data:`DT_TOLERANCE`, fewer than :data:`MIN_SAMPLES` samples, ``u``
+            or ``y`` outside :data:`bwdesign.validate.SIGNAL`, the sample time
+            outside :data:`bwdesign.validate.DT` (the range every command takes),
+            or the input or the output never moves.
         """
         where = f"{source}: " if source else ""
         arrays = {}
@@ -98,6 +101,8 @@ class IdentificationData:
                 f"(t = {t[k + 1]:.9g} s after {t[k]:.9g} s)"
             )
         dt = float(np.median(steps))
+        # the range every other command takes for dt: the stage file written from it must load
+        real(dt, f"{where}the record's sample time dt (s)", within=DT)
         dev = np.abs(steps - dt) / dt
         if dev.max() > DT_TOLERANCE:
             k = int(np.argmax(dev))
@@ -106,6 +111,9 @@ class IdentificationData:
                 f"differs from the median step {dt:.6g} s by {100 * dev[k]:.3g} % "
                 f"(tolerance {100 * DT_TOLERANCE:g} %)"
             )
+        for name, a, unit in (("u", u, "V"), ("y", y, "µm")):
+            k = int(np.argmax(np.abs(a)))
+            real(float(a[k]), f"{where}{name} at data row {k + 1} ({unit})", within=SIGNAL)
         if np.ptp(u) <= 1e-12 * max(1.0, float(np.max(np.abs(u)))):
             raise InputError(
                 f"{where}the input u never moves (constant {u[0]:g} V): nothing to fit"
@@ -116,6 +124,7 @@ class IdentificationData:
             a.setflags(write=False)
         # the mean step over the record, to 12 digits (a logged 2e-4 stays 2e-4)
         dt = float(f"{(t[-1] - t[0]) / (t.size - 1):.12g}")
+        real(dt, f"{where}the record's sample time dt (s)", within=DT)
         return cls(t=t, u=u, y=y, dt=dt, source=source)
 
     @property
@@ -147,16 +156,22 @@ def load_data(
         Names of the time, input and output columns (``"t,u,y"`` by default);
         other columns are ignored.
 
+    A UTF-8 byte-order mark at the start of a CSV file is accepted.
+
     Raises
     ------
     InputError
-        Missing file or column, non-numeric value (row and column named), and
-        every check of :meth:`IdentificationData.from_arrays`.
+        Missing file or column, a directory, non-numeric value (row and column
+        named), and every check of :meth:`IdentificationData.from_arrays`.
     """
     path = Path(path)
     names = _parse_columns(columns)
-    if not path.is_file():
+    if path.is_dir():
+        raise InputError(f"data file {str(path)!r} is a directory; give a .csv or .npz file")
+    if not path.exists():
         raise InputError(f"data file {str(path)!r} does not exist")
+    if not path.is_file():
+        raise InputError(f"data file {str(path)!r} is not a regular file")
     if path.suffix.lower() == ".npz":
         try:
             with np.load(path, allow_pickle=False) as npz:
@@ -174,7 +189,8 @@ def load_data(
                 raise InputError(f"{path}: array {c} is not numeric (dtype {a.dtype})")
         return IdentificationData.from_arrays(*arrays, source=str(path))
     try:
-        text = path.read_text(encoding="utf-8")
+        # utf-8-sig: a byte-order mark (spreadsheet programs write one) is not a header character
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as err:
         raise InputError(f"cannot read data file {str(path)!r}: {err}") from None
     lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.strip()]

@@ -9,13 +9,16 @@ An input that identifies all six parameters needs two things at once:
   frequency), so a1 and a2 are seen, not assumed.
 
 ``multisine``: a slow two-tone sweep of the range (f0 and 3.3 f0, f0 as high as
-the rate limit allows up to a tenth of the resonance, at least 3/duration)
+the rate limit allows up to a tenth of the resonance, at least 3/duration
+while the rate allows it at the full range, else slower, down to one sweep)
 plus triangular minor loops over about three saturation lengths 1/(beta + gamma)
 of the guess, plus a Schroeder-phased multisine over the resonance band. ``triangle-sweep``:
-triangles from f0 up to a fraction of the resonance whose amplitude falls as
-the frequency rises so the rate limit holds, which puts harmonics through the
-resonance. Both are scaled to stay within ``[umin, umax]`` and ``|du/dt| <=
-udot_max`` (checked on the sampled signal, |u[k+1] - u[k]| <= udot_max dt).
+one full-range triangle at f0, then triangles up to a fraction of the resonance
+whose amplitude falls as the frequency rises so the rate limit holds, which puts
+harmonics through the resonance. Both span the range asked to within
+:data:`RANGE_MARGIN` (2.5 %) of each end and keep ``|du/dt| <= udot_max``
+(checked on the sampled signal, |u[k+1] - u[k]| <= udot_max dt); a rate too low
+to cross the range once over the record (:func:`smallest_rate`) is refused.
 """
 
 from __future__ import annotations
@@ -29,9 +32,14 @@ from ..model.params import BoucWenParams
 from ..model.plant import simulate_zoh
 from .data import IdentificationData
 
-__all__ = ["design_excitation", "simulate_record", "KINDS"]
+__all__ = ["design_excitation", "smallest_rate", "simulate_record", "KINDS", "RANGE_MARGIN"]
 
 KINDS = ("multisine", "triangle-sweep")
+#: Fraction of the amplifier range kept clear at each end: the input reaches to within
+#: this of ``umin`` and of ``umax``, so it spans 95 % of the range asked.
+RANGE_MARGIN = 0.025
+#: Fewest slow sweeps of the range over the record.
+MIN_SWEEPS = 1.0
 
 
 def _check(umin: float, umax: float, udot_max: float, duration: float, dt: float) -> int:
@@ -56,6 +64,44 @@ def _check(umin: float, umax: float, udot_max: float, duration: float, dt: float
     return n
 
 
+def _rate(u: np.ndarray, dt: float) -> float:
+    """Largest |u[k+1] - u[k]| / dt (V/s)."""
+    return float(np.max(np.abs(np.diff(u)))) / dt
+
+
+def _sweep(t: np.ndarray, f0: float) -> np.ndarray:
+    """The slow two-tone sweep of the range, peak about 1."""
+    return 0.7 * np.sin(2 * np.pi * f0 * t - 0.5 * np.pi) + 0.3 * np.sin(2 * np.pi * 3.3 * f0 * t)
+
+
+def _span(s: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``s`` mapped affinely onto ``[lo, hi]`` (its minimum to lo, its maximum to hi)."""
+    return lo + (s - s.min()) * ((hi - lo) / float(np.ptp(s)))
+
+
+def smallest_rate(
+    *, umin: float, umax: float, duration: float, dt: float, kind: str = "multisine"
+) -> float:
+    """The smallest ``udot_max`` (V/s) at which :func:`design_excitation` uses the range asked.
+
+    The rate of the slowest design: :data:`MIN_SWEEPS` sweep(s) of
+    ``[umin, umax]`` (less :data:`RANGE_MARGIN` at each end) over ``duration``,
+    without minor loops or a resonance band (for ``triangle-sweep``: its first
+    triangle at ``MIN_SWEEPS / duration``). Below it the input could not cross the
+    range: :func:`design_excitation` refuses such a rate instead of writing a
+    nearly constant input.
+    """
+    if kind not in KINDS:
+        raise InputError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    n = _check(umin, umax, 1.0, duration, dt)
+    lo, hi = umin + RANGE_MARGIN * (umax - umin), umax - RANGE_MARGIN * (umax - umin)
+    t = np.arange(n) * dt
+    f0 = MIN_SWEEPS / duration
+    if kind == "triangle-sweep":
+        return 2.0 * (hi - lo) * f0 / 0.9  # one triangle at f0 within 0.9 of the rate
+    return _rate(_span(_sweep(t, f0), lo, hi), dt)
+
+
 def design_excitation(
     guess: BoucWenParams,
     *,
@@ -69,6 +115,12 @@ def design_excitation(
 ) -> tuple[np.ndarray, np.ndarray]:
     """An input to play on the bench.
 
+    The input spans ``[umin, umax]`` to within :data:`RANGE_MARGIN` of the range
+    at each end (95 % of it) and keeps ``|u[k+1] - u[k]| <= udot_max dt``; where
+    the rate limit does not allow the planned frequencies at that amplitude, the
+    slow sweep and the minor loops are slowed (down to :data:`MIN_SWEEPS` sweep
+    over the record) and the resonance band is made smaller, never the range.
+
     Parameters
     ----------
     guess : BoucWenParams
@@ -77,7 +129,7 @@ def design_excitation(
     umin, umax : float
         Amplifier range (V).
     udot_max : float
-        Rate limit (V/s).
+        Rate limit (V/s), at least :func:`smallest_rate`.
     duration : float
         Length (s).
     dt : float
@@ -89,73 +141,122 @@ def design_excitation(
     -------
     t, u : ndarray
         Times (s) and held input (V).
+
+    Raises
+    ------
+    InputError
+        Bad numbers, too few or too many samples, or ``udot_max`` below
+        :func:`smallest_rate` (the message states it).
     """
     if kind not in KINDS:
         raise InputError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     n = _check(umin, umax, udot_max, duration, dt)
+    need = smallest_rate(umin=umin, umax=umax, duration=duration, dt=dt, kind=kind)
+    if udot_max < need:
+        raise InputError(
+            f"udot_max = {udot_max:g} V/s is below the smallest usable {need:.4g} V/s for a "
+            f"{kind} over [{umin:g}, {umax:g}] V in {duration:g} s (one sweep of the range); "
+            "raise the rate limit, lengthen the record or narrow the range"
+        )
     t = np.arange(n) * dt
-    mid, half = 0.5 * (umin + umax), 0.5 * (umax - umin)
+    lo, hi = umin + RANGE_MARGIN * (umax - umin), umax - RANGE_MARGIN * (umax - umin)
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
     fr = math.sqrt(guess.a1) / (2 * math.pi)
     # as many large reversals as the rate limit allows (at least three cycles), a
     # decade below the resonance: hysteresis is rate independent, each cycle adds
     # information on alpha, beta, gamma
     f_rate = 0.6 * udot_max / (2 * math.pi * 1.69 * 0.8 * half)
     f0 = max(3.0 / duration, min(f_rate, fr / 10.0))
-    fmax = 0.45 / dt
-    rng = np.random.default_rng(seed)
-    if kind == "multisine":
-        slow = 0.7 * np.sin(2 * np.pi * f0 * t - 0.5 * np.pi) + 0.3 * np.sin(
-            2 * np.pi * 3.3 * f0 * t
-        )
-        # minor loops: reversals over a few saturation lengths 1/(beta + gamma) of the
-        # guess carry most of the information on the loop shape
-        sat = 1.0 / max(guess.beta + guess.gamma, 1e-12)
-        a_minor = min(3.0 * sat, 0.25 * half)
-        f_minor = min(fr / 4.0, 0.3 * udot_max / (4.0 * a_minor), fmax / 4.0)
-        minor = (
-            (a_minor / half)
-            * (2.0 / math.pi)
-            * np.arcsin(np.sin(2 * np.pi * max(f_minor, 7.1 * f0) * t))
-        )
-        freqs = np.geomspace(0.3 * fr, min(3.0 * fr, fmax), 12)
-        freqs = freqs[freqs > 10 * f0]
-        fast = np.zeros(n)
-        m = max(1, freqs.size)
-        for i, f in enumerate(freqs):
-            phase = math.pi * i * (i + 1) / m + 0.01 * rng.standard_normal()
-            fast += np.sin(2 * np.pi * f * t + phase)
-        if freqs.size:
-            fast /= np.max(np.abs(fast))
-        # the sweep, minor loops and the band share the range; all rate-limited
-        u = _fit_limits(
-            slow * (1 - a_minor / half) + minor, fast, mid, half, udot_max, dt, share=0.15
-        )
+    if kind == "triangle-sweep":
+        u = _triangle_sweep(t, dt, f0, fr, mid, half, udot_max)
+        spanned = _span(u, lo, hi)  # the sampled peaks miss the ends by a fraction of a step
+        u = spanned if _rate(spanned, dt) <= udot_max else u
     else:
-        # triangle frequency rises geometrically from f0 to fr/3; amplitude capped by the rate
-        f_end = max(f0, min(fr / 3.0, fmax / 3.0))
-        f_inst = f0 * (f_end / f0) ** (t / duration)
-        phase = np.cumsum(f_inst) * dt
-        tri = 2.0 / math.pi * np.arcsin(np.sin(2 * np.pi * phase - 0.5 * np.pi))
-        amp = np.minimum(1.0, 0.9 * udot_max / (4 * f_inst * half))
-        u = mid + 0.95 * half * amp * tri
+        u = _multisine(guess, t, dt, f0, fr, lo, hi, udot_max, seed)
     u = np.clip(u, umin, umax)
-    rate = np.max(np.abs(np.diff(u))) / dt
-    if rate > udot_max * (1 + 1e-9):
+    rate = _rate(u, dt)
+    if rate > udot_max * (1 + 1e-9):  # pragma: no cover - each design keeps the rate
         u = mid + (u - mid) * udot_max / rate
     return t, u
 
 
-def _fit_limits(slow, fast, mid, half, udot_max, dt, *, share):
-    a_fast = share * half
-    a_slow = (1.0 - share) * 0.95 * half
-    for _ in range(60):
-        u = mid + a_slow * slow + a_fast * fast
-        rate = np.max(np.abs(np.diff(u))) / dt
-        if rate <= udot_max:
-            return u
-        a_fast *= 0.8 if a_fast * np.max(np.abs(np.diff(fast))) / dt > 0.3 * udot_max else 1.0
-        a_slow *= 0.9 if a_slow * np.max(np.abs(np.diff(slow))) / dt > 0.5 * udot_max else 1.0
-    return mid + a_slow * slow + a_fast * fast
+def _triangle_sweep(t, dt, f0, fr, mid, half, udot_max) -> np.ndarray:
+    """One full-range triangle at f0, then a geometric rise to fr/3 with a rate-capped amplitude.
+
+    The amplitude cap ``c udot_max / (4 f half)`` falls as the frequency rises; its
+    fall adds ``half |d amp/dt|`` to the rate, so ``c`` leaves room for it
+    (``c = 0.95 / (1 + ln(f_end/f0) / (4 f0 T_rise))``) and the first triangle's
+    frequency keeps ``4 f0 half <= c udot_max``, where the cap is still 1 (no jump).
+    """
+    duration = t.size * dt
+    floor = MIN_SWEEPS / duration
+    f_end = max(f0, min(fr / 3.0, 0.15 / dt))
+    c = 0.9
+    for _ in range(20):  # c and f1 depend on each other: a few rounds settle them
+        # below the floor there is no rise (one triangle fills the record); else
+        # 4 f1 half <= c udot_max, so the cap is 1 where the rise starts
+        f1 = max(floor, min(f0, c * udot_max / (4 * half)))
+        rise_time = duration - min(1.0 / f1, duration)
+        safe = (
+            0.95 / (1 + math.log(f_end / f1) / (4 * f1 * rise_time))
+            if rise_time > 0 and f_end > f1
+            else c
+        )
+        if safe >= c:
+            break
+        c = safe
+    t1 = min(1.0 / f1, duration)
+    rise = np.clip((t - t1) / max(duration - t1, dt), 0.0, 1.0)
+    f_inst = f1 * (max(f_end, f1) / f1) ** rise
+    phase = np.concatenate(([0.0], np.cumsum(f_inst[:-1]) * dt))
+    tri = 2.0 / math.pi * np.arcsin(np.sin(2 * np.pi * phase - 0.5 * np.pi))
+    amp = np.where(t < t1, 1.0, np.minimum(1.0, c * udot_max / (4 * f_inst * half)))
+    return mid + half * amp * tri
+
+
+def _multisine(guess, t, dt, f0, fr, lo, hi, udot_max, seed) -> np.ndarray:
+    """Sweep + minor loops + resonance band, spanning ``[lo, hi]`` within the rate limit.
+
+    The band's share of the amplitude shrinks first; when the sweep and the minor
+    loops alone exceed the rate at the full span, the sweep is slowed (by 0.8 a
+    step; the minor loops keep their frequency, which carries the loop shape)
+    down to :data:`MIN_SWEEPS` sweep over the record, where the minor loops are
+    dropped last. :func:`smallest_rate` is the rate of that last design, so a
+    ``udot_max`` at or above it always ends here.
+    """
+    half = 0.5 * (hi - lo)
+    floor = MIN_SWEEPS / (t.size * dt)
+    fmax = 0.45 / dt
+    # minor loops: reversals over a few saturation lengths 1/(beta + gamma) of the
+    # guess carry most of the information on the loop shape
+    sat = 1.0 / max(guess.beta + guess.gamma, 1e-12)
+    a_minor = min(3.0 * sat, 0.25 * half)
+    f_minor = min(fr / 4.0, 0.3 * udot_max / (4.0 * a_minor), fmax / 4.0)
+    freqs = np.geomspace(0.3 * fr, min(3.0 * fr, fmax), 12)
+    jitter = 0.01 * np.random.default_rng(seed).standard_normal(freqs.size)
+    bands: dict[int, np.ndarray] = {}
+    slowdown = 1.0
+    while True:
+        f_s = max(floor, f0 * slowdown)
+        band = freqs[freqs > 10 * f_s]  # grows as the sweep slows: cache by size
+        if band.size not in bands:
+            fast = np.zeros(t.size)
+            for i, f in enumerate(band):
+                fast += np.sin(2 * np.pi * f * t + math.pi * i * (i + 1) / band.size + jitter[i])
+            bands[band.size] = fast / np.max(np.abs(fast)) if band.size else fast
+        fast = bands[band.size]
+        minor = (2.0 / math.pi) * np.arcsin(np.sin(2 * np.pi * max(f_minor, 7.1 * f_s) * t))
+        for rho in (a_minor / half, 0.0) if f_s == floor else (a_minor / half,):
+            slow = _sweep(t, f_s) * (1 - rho) + rho * minor
+            share = 0.15 if band.size else 0.0
+            while True:
+                u = _span(slow * (1 - share) + share * fast, lo, hi)
+                if _rate(u, dt) <= udot_max or (f_s == floor and rho == 0.0 and share == 0.0):
+                    return u
+                share = share * 0.8 if share > 1e-3 else 0.0
+                if share == 0.0 and _rate(_span(slow, lo, hi), dt) > udot_max:
+                    break
+        slowdown *= 0.8
 
 
 def simulate_record(

@@ -31,16 +31,26 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import BWDesignError, ConfigError, InputError, ParameterError
-from ..validate import DECAY, DT, GAIN, POLE_RADIUS, SIGNAL, UDOT_MAX, Range, real
+from ..validate import (
+    DECAY,
+    DT,
+    GAIN,
+    POLE_RADIUS,
+    SIGNAL,
+    UDOT_MAX,
+    Range,
+    below_nyquist,
+    real,
+)
 from .envelope import Envelope, derive_envelope, given_envelope
 from .params import PRESETS, BoucWenParams, preset
 from .plant import check_sample_time
 from .references import Reference, reference_from_dict
 from .requirements import parse_requirements
-from .stage_presets import resolve_config, stage_presets
+from .stage_presets import resolve_config, stage_presets, unknown_plant_message
 from .uncertainty import UncertaintyBox
 
-__all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant"]
+__all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant", "parse_toml"]
 
 _SECTIONS = {
     "plant": None,
@@ -277,6 +287,8 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     reference = None
     if "reference" in data:
         reference = reference_from_dict(data["reference"])
+        if dt is not None:
+            below_nyquist(reference, dt, what="[reference]", error=ConfigError)
 
     env = None
     if "envelope" in data:
@@ -345,11 +357,33 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
 MAX_CONFIG_BYTES = 1 << 20
 
 
+def parse_toml(raw: bytes, where: str) -> dict[str, Any]:
+    """TOML bytes to a table: UTF-8 with an optional byte-order mark (as spreadsheet
+    programs and some editors write), nesting no deeper than Python's parser goes.
+
+    Raises
+    ------
+    ConfigError
+        Not UTF-8, malformed TOML, or values nested too deeply to read (a
+        ``RecursionError`` inside :mod:`tomllib`).
+    """
+    try:
+        return tomllib.loads(raw.decode("utf-8-sig"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ConfigError(f"{where}: malformed TOML: {err}") from None
+    except RecursionError:
+        raise ConfigError(
+            f"{where}: malformed TOML: arrays or tables nested too deeply to read"
+        ) from None
+
+
 def load_config(path: str | Path) -> StageConfig:
     """Read and validate a stage configuration file.
 
     ``path`` may also name a bundled stage configuration (``paper_experiment``,
     see :func:`bwdesign.stage_presets`); a path that exists wins.
+
+    A UTF-8 byte-order mark at the start of the file is accepted.
 
     Raises
     ------
@@ -373,10 +407,7 @@ def load_config(path: str | Path) -> StageConfig:
         raise ConfigError(f"config file {str(path)!r} does not exist") from None
     except OSError as err:
         raise ConfigError(f"cannot read config file {str(path)!r}: {err.strerror}") from None
-    try:
-        data = tomllib.loads(raw.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ConfigError(f"{path}: malformed TOML: {err}") from None
+    data = parse_toml(raw, str(path))
     try:
         return parse_config(data, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
     except BWDesignError as err:
@@ -399,9 +430,9 @@ def load_plant(name_or_path: str | Path) -> BoucWenParams:
     """
     if isinstance(name_or_path, str) and name_or_path in PRESETS:
         return preset(name_or_path)
-    if not str(name_or_path).strip():
-        return preset("")  # raises the "unknown preset" error, listing the presets
     p = Path(name_or_path)
-    if p.suffix.lower() != ".toml" and not p.exists() and str(p) not in stage_presets():
-        return preset(str(name_or_path))  # raises the "unknown preset" error
+    if not str(name_or_path).strip() or (
+        p.suffix.lower() != ".toml" and not p.exists() and str(p) not in stage_presets()
+    ):
+        raise ConfigError(unknown_plant_message(str(name_or_path)))
     return load_config(p).plant

@@ -9,11 +9,22 @@ file's stem, e.g. ``paper_experiment``) as well as a path; a path that exists wi
 from __future__ import annotations
 
 import re
+import tomllib
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ConfigError
+from .params import PRESET_NOTES, PRESETS, BoucWenParams
 
-__all__ = ["STAGES_DIR", "stage_presets", "stage_preset_path", "resolve_config"]
+__all__ = [
+    "STAGES_DIR",
+    "PresetEntry",
+    "preset_catalogue",
+    "stage_presets",
+    "stage_preset_path",
+    "resolve_config",
+    "unknown_plant_message",
+]
 
 #: Folder of the bundled stage configurations (inside the installed package).
 STAGES_DIR = Path(__file__).with_name("stages")
@@ -40,6 +51,66 @@ def stage_presets() -> dict[str, str]:
     True
     """
     return {p.stem: _describe(p) for p in sorted(STAGES_DIR.glob("*.toml"))}
+
+
+@dataclass(frozen=True)
+class PresetEntry:
+    """One name the command line takes as a preset.
+
+    Attributes
+    ----------
+    name : str
+    description : str
+        One line.
+    stage_file : bool
+        True for a bundled stage configuration (``--plant``, ``--config``,
+        ``init --preset``); False for a parameter set only (``--plant``, the
+        Python :func:`bwdesign.preset`).
+    bounded : bool
+        Whether the parameters are in the bounded Bouc-Wen class; design and
+        simulation commands refuse the others unless ``--allow-unbounded``
+        (``params`` prints them with the verdict).
+    """
+
+    name: str
+    description: str
+    stage_file: bool
+    bounded: bool
+
+
+def preset_catalogue() -> list[PresetEntry]:
+    """Every preset name, sorted: the one list ``bwdesign presets`` prints and errors quote.
+
+    The bundled stage configurations (:func:`stage_presets`) and the parameter
+    sets of :data:`bwdesign.PRESETS` that have no stage file (``paper_simulation``,
+    the paper's Section 4 as printed, outside the bounded class).
+    """
+    stages = stage_presets()
+    out = []
+    for name in sorted(set(stages) | set(PRESETS)):
+        if name in PRESETS:
+            plant = PRESETS[name]
+        else:  # a bundled file: its [plant] (the whole file is validated by load_config)
+            text = stage_preset_path(name).read_text(encoding="utf-8")
+            plant = BoucWenParams.from_dict(tomllib.loads(text)["plant"])
+        out.append(
+            PresetEntry(
+                name=name,
+                description=stages.get(name) or PRESET_NOTES.get(name, ""),
+                stage_file=name in stages,
+                bounded=plant.bounded_class().bounded,
+            )
+        )
+    return out
+
+
+def unknown_plant_message(name: str) -> str:
+    """The error for a ``--plant`` that is neither a preset nor a file (lists every preset)."""
+    names = ", ".join(e.name for e in preset_catalogue())
+    return (
+        f"unknown plant preset {name!r}; presets are {names} (bwdesign presets describes "
+        "them), or give a path to a .toml file"
+    )
 
 
 def _names() -> str:

@@ -9,13 +9,16 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GainError
+from ..errors import GainError, InputError
 from ..model.params import BoucWenParams
 from ..model.plant import _check_dt, discretize
 from ..validate import GAIN
 
 __all__ = [
     "disturbance_gains_from",
+    "gains_for_observer",
+    "hurwitz_violations",
+    "GAIN_OBSERVERS",
     "check_gains",
     "error_matrix",
     "discrete_gains",
@@ -51,22 +54,20 @@ def _as_gains(gains: Any, what: str = "gains") -> np.ndarray:
     return g
 
 
-def check_gains(params: BoucWenParams, gains: Any) -> np.ndarray:
-    """Validate continuous observer gains against the Hurwitz conditions (4).
+def hurwitz_violations(params: BoucWenParams, gains: Any) -> list[str]:
+    """The Hurwitz conditions (4) that the gains violate (empty when ``A0 - l C`` is Hurwitz).
 
     ``l1 + a2 > 0``, ``(l1 + a2)(l1 a2 + a1 + l2) + l3 a1 > 0`` and ``l3 a1 < 0``
     make ``A0 - l C`` Hurwitz (Routh-Hurwitz on its characteristic polynomial).
-
-    Returns
-    -------
-    ndarray, shape (3,)
+    Each violated one is a line naming the condition and its value.
 
     Raises
     ------
     GainError
-        Wrong length, non-finite, or a violated condition (named in the message).
+        The gains are not three finite numbers in the supported range (a malformed
+        input, as opposed to well-formed gains that are not stabilising).
     """
-    l1, l2, l3 = g = _as_gains(gains)
+    l1, l2, l3 = _as_gains(gains)
     a1, a2 = params.a1, params.a2
     c2 = (l1 + a2) * (l1 * a2 + a1 + l2) + l3 * a1
     failed = []
@@ -79,6 +80,25 @@ def check_gains(params: BoucWenParams, gains: Any) -> np.ndarray:
         )
     if not l3 * a1 < 0:
         failed.append("l3 a1 < 0 (l3 must be negative)")
+    return failed
+
+
+def check_gains(params: BoucWenParams, gains: Any) -> np.ndarray:
+    """Validate continuous observer gains against the Hurwitz conditions (4).
+
+    See :func:`hurwitz_violations` for the conditions.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+
+    Raises
+    ------
+    GainError
+        Wrong length, non-finite, or a violated condition (named in the message).
+    """
+    l1, l2, l3 = g = _as_gains(gains)
+    failed = hurwitz_violations(params, g)
     if failed:
         raise GainError(
             f"observer gains l = ({l1:g}, {l2:g}, {l3:g}) on {params.name or 'the plant'}: "
@@ -282,10 +302,41 @@ def disturbance_gains_from(gains: Any) -> tuple[float, float, float, float]:
 
     Its observable part ``(x1, x2, x3 + d)`` then has the poles of the 3-state
     design, the whole correction of the lumped state goes to ``d``, and the
-    hysteresis copy runs on the model alone (``l3 = 0``).
+    hysteresis copy runs on the model alone (``l3 = 0``). The same map takes
+    discrete 3-state gains ``(k1, k2, k3)`` to the PHDO's ``(k1, k2, 0, k3)``.
     """
     l1, l2, l3 = (float(g) for g in _as_gains(gains))
     return (l1, l2, 0.0, l3)
+
+
+#: The sampled observers that run a 3-state design's gains (the PHDO through
+#: :func:`disturbance_gains_from`).
+GAIN_OBSERVERS = ("phso", "eso", "phdo")
+
+
+def gains_for_observer(observer: str, gains: Any) -> tuple[float, ...]:
+    """The gains ``observer`` runs for the 3-state design ``gains``: the package's one map.
+
+    ``"phso"`` and ``"eso"`` run ``(l1, l2, l3)`` as given; ``"phdo"`` (the
+    disturbance observer) runs ``(l1, l2, 0, l3)`` (:func:`disturbance_gains_from`).
+    Used wherever 3-state gains meet the PHDO: ``export-c``,
+    :func:`bwdesign.testing.assert_c_matches_python`, sweeps, the digital tuning
+    and the robust design.
+
+    Raises
+    ------
+    InputError
+        ``observer`` is not one of ``"phso"``, ``"eso"``, ``"phdo"``.
+    GainError
+        ``gains`` are not three finite numbers.
+    """
+    if observer not in GAIN_OBSERVERS:
+        raise InputError(
+            f"observer must be one of {', '.join(map(repr, GAIN_OBSERVERS))}, got {observer!r}"
+        )
+    if observer == "phdo":
+        return disturbance_gains_from(gains)
+    return tuple(float(g) for g in _as_gains(gains))
 
 
 def check_disturbance_gains(params: BoucWenParams, gains: Any) -> np.ndarray:

@@ -16,7 +16,9 @@ tier, the sweep, the robust certificate), which :func:`build_report` adds.
 
 from __future__ import annotations
 
+import os
 import platform
+import shlex
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +37,7 @@ from ..errors import ConfigError, InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope
 from ..model.params import require_bounded
+from ..model.stage_presets import STAGES_DIR
 from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
 from ..output.files import prepare_directory
@@ -354,8 +357,12 @@ def build_report(
     allow_unbounded: bool = False,
     quiet: bool = False,
     date: str | None = None,
+    out_dir: str | Path | None = None,
 ) -> tuple[Document, dict[str, Any], bool, str]:
     """Compute everything and write figures into ``out / "figures"``.
+
+    ``out_dir``: the report's directory as the user named it (``out`` may be a
+    staging folder inside it), for the reproducibility command's ``--out``.
 
     Returns the document, the certificate JSON document, the verdict flag and sentence.
     """
@@ -641,7 +648,7 @@ def build_report(
             ["solvers", "Clarabel (fallback SCS); only OPTIMAL is accepted"],
             ["config", Path(config.source).name],
             ["config sha256", config.sha256],
-            ["command", f"bwdesign report --config {Path(config.source).name}"],
+            ["command", _command(config, out_dir, allow_unbounded)],
         ],
     )
     doc.para(f"Date: {date or datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}")
@@ -650,6 +657,20 @@ def build_report(
     )
     doc.insert(top, summary_block(summary))
     return doc, cert_doc, ok, verdict
+
+
+def _command(config: StageConfig, out_dir: str | Path | None, allow_unbounded: bool) -> str:
+    """The command that writes this report again, run where this one was.
+
+    The config as it was named (a bundled stage by its preset name), ``--out`` as
+    given (``DIR`` when unknown), ``--allow-unbounded`` when it was needed.
+    """
+    source = Path(config.source)
+    bundled = source.parent in (STAGES_DIR, STAGES_DIR.resolve())
+    name = source.stem if bundled else config.source
+    out = "DIR" if out_dir is None else shlex.quote(os.fspath(out_dir))
+    flags = " --allow-unbounded" if allow_unbounded else ""
+    return f"bwdesign report --config {shlex.quote(name)} --out {out}{flags}"
 
 
 def _mismatch_text(mismatch: dict[str, float]) -> str:
@@ -711,7 +732,12 @@ def write_report(
     )
     with target.stage() as stage:
         doc, cert_doc, ok, verdict = build_report(
-            config, stage.root, allow_unbounded=allow_unbounded, quiet=quiet, date=date
+            config,
+            stage.root,
+            allow_unbounded=allow_unbounded,
+            quiet=quiet,
+            date=date,
+            out_dir=out_dir,
         )
         stage.write_text("certificate.json", dump_json(cert_doc) + "\n")
         stage.write_text("report.md", doc.to_markdown())

@@ -172,7 +172,7 @@ def sweep_document(
     n = len(np.unique(table["scenario"]))
     doc.para(
         f"{n} scenarios, seed {settings['seed']}, {settings['distribution']} in the box below; "
-        f"observers {', '.join(o.upper() for o in spec.observers)}; {spec.reference.to_dict()}; "
+        f"observers {', '.join(o.upper() for o in spec.observers)}; {spec.reference.describe()}; "
         f"dt = {spec.dt:g} s, {spec.duration:g} s per scenario, sensor noise "
         f"{spec.noise_std:g} {lu} (seeded per scenario), "
         f"{'one-sample delay, ' if spec.delay else ''}"

@@ -44,8 +44,13 @@ Two paths:
 Both return a :class:`SimulationResult`. A loop that diverges (non-finite or
 huge states) is reported as ``stable = False`` with the record up to the
 divergence; it never raises.
+
+:func:`simulate_batch` runs the sampled-data loop for many true plants at once
+(vectorised over scenarios; the Monte Carlo sweep's engine) and returns a
+:class:`BatchResult`.
 """
 
+from .batch import BatchResult, simulate_batch
 from .closed_loop import make_observer, simulate
 from .continuous import simulate_continuous
 from .metrics import Metrics, steady_state_window, tracking_metrics
@@ -58,6 +63,8 @@ __all__ = [
     "steady_state_window",
     "SimulationResult",
     "simulate",
+    "simulate_batch",
+    "BatchResult",
     "make_observer",
     "simulate_continuous",
     "start_on_reference",

@@ -39,6 +39,7 @@ from ..observers.gains import (
     discrete_gains,
     disturbance_discrete_gains,
 )
+from ..validate import below_nyquist
 from .closed_loop import _diverged, _finite_nonneg, _state
 from .metrics import steady_state_window
 
@@ -257,6 +258,7 @@ def simulate_batch(
             raise InputError(f"true_params[{i}] must be a BoucWenParams")
         require_bounded(tp, allow_unbounded)
     dt = _check_dt(dt)
+    below_nyquist(reference, dt)
     duration = _finite_nonneg(duration, "duration (s)")
     n = int(round(duration / dt))
     if n < 2:

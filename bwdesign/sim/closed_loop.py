@@ -21,7 +21,7 @@ from ..observers.sampled import (
     ExtendedStateObserver,
     HysteresisObserver,
 )
-from ..validate import SEED, integer
+from ..validate import SEED, below_nyquist, integer
 from .metrics import steady_state_window, tracking_metrics
 from .result import SimulationResult
 
@@ -377,6 +377,7 @@ def simulate(
     require_bounded(params, allow_unbounded)
     require_bounded(tp, allow_unbounded)
     dt = check_sample_time(tp, check_sample_time(params, dt))
+    below_nyquist(reference, dt)
     duration = _finite_nonneg(duration, "duration (s)")
     n = int(round(duration / dt))
     if n < 2:

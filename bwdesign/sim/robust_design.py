@@ -49,9 +49,11 @@ from ..control.controllers import make_controller
 from ..control.tuning import DigitalTuning, digital_tuning
 from ..errors import InputError
 from ..model.params import BoucWenParams
+from ..model.plant import check_sample_time
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import check_gains, disturbance_gains_from
+from ..observers.gains import check_gains, gains_for_observer
+from ..validate import below_nyquist
 from .batch import BatchResult, simulate_batch
 from .start import start_on_reference
 
@@ -315,6 +317,7 @@ def synthesize_robust(
         raise InputError(f"max_candidates must be an integer >= 1, got {max_candidates!r}")
     if max_candidates < 1:
         raise InputError(f"max_candidates must be >= 1, got {max_candidates}")
+    below_nyquist(reference, check_sample_time(params, dt))
     tuning = digital_tuning(
         params, dt, uncertainty=uncertainty, integral_ratio=integral_ratio, delay=delay
     )
@@ -333,8 +336,7 @@ def synthesize_robust(
     results: list[tuple[dict[str, Any], RobustCertificate | None]] = []
     iu = params.input_unit
     for c in cands:
-        if observer == "phdo":
-            c["gains"] = disturbance_gains_from(c["gains"])
+        c["gains"] = gains_for_observer(observer, c["gains"])
         c.update(_corners(params, uncertainty, reference, tuning.dt, c, delay, observer))
         c.update(holds=False, tracking_bound=None, estimation_bound=None, envelope=None)
         c["x3_estimation_bound"] = None

@@ -40,7 +40,7 @@ from ..errors import BWDesignError, InputError, UnboundedModelError
 from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
-from ..observers.gains import disturbance_gains_from
+from ..observers.gains import gains_for_observer
 from ..validate import UDOT_MAX, Range, integer, real
 from .batch import BATCH_OBSERVERS, simulate_batch
 from .start import start_on_reference
@@ -144,7 +144,7 @@ class SweepSpec:
 
     def gains_for(self, observer: str) -> tuple[float, ...]:
         """The continuous gains ``observer`` runs: ``gains``; ``(l1, l2, 0, l3)`` for the PHDO."""
-        return disturbance_gains_from(self.gains) if observer == "phdo" else tuple(self.gains)
+        return gains_for_observer(observer, self.gains)
 
     def __post_init__(self) -> None:
         if self.start not in ("reference", "rest"):

@@ -173,10 +173,14 @@ def assert_c_matches_python(
     system C compiler, runs ``steps`` samples of a sine with minor loops and 10 nm
     noise and compares the posterior with ``batch_filter``, relative to each
     state's range (``tol`` default 1e-12 for float64, 1e-4 for float32).
+    ``observer``: ``"phso"``, ``"eso"`` or ``"phdo"``; each runs the gains
+    :func:`~bwdesign.export_c` gives it from the stage's ``[observer]`` gains
+    (:func:`bwdesign.observers.gains.gains_for_observer`: ``(l1, l2, 0, l3)`` for the PHDO).
     """
     __tracebackhide__ = True
     from ..codegen.export import OBSERVERS, export_c
     from ..model.plant import simulate_zoh
+    from ..observers.gains import gains_for_observer
 
     config = as_stage(stage)
     cc = compiler or shutil.which("cc") or shutil.which("gcc")
@@ -198,7 +202,8 @@ def assert_c_matches_python(
         z = simulate_zoh(p, u, dt, x0=np.zeros(3))[1:, 0]
         z = z + np.random.default_rng(0).normal(0, 0.01, steps)
         cls = OBSERVERS[observer][0]
-        ref = cls(p, config.gains, dt).batch_filter(z, u)
+        # the gains export-c gives this observer: (l1, l2, 0, l3) for the PHDO
+        ref = cls(p, gains_for_observer(observer, config.gains), dt).batch_filter(z, u)
         text = "\n".join(f"{a!r},{b!r}" for a, b in zip(u.tolist(), z.tolist(), strict=True))
         res = subprocess.run(
             [str(exe), observer], input=text, capture_output=True, text=True, check=True

@@ -26,6 +26,7 @@ from ..errors import ConfigError, InputError
 from ..model.config import StageConfig, load_config
 from ..model.params import MODEL_FIELDS, PRESETS, BoucWenParams, preset
 from ..model.requirements import REQUIREMENT_KEYS
+from ..observers.gains import hurwitz_violations
 from ..sim.batch import simulate_batch
 from ..sim.start import start_on_reference
 
@@ -99,6 +100,27 @@ def _need(config: StageConfig, what: str, **items: Any) -> None:
         raise ConfigError(f"{_name(config)}: {what} needs {', '.join(missing)}")
 
 
+def _not_hurwitz(config: StageConfig, gains: Any) -> str | None:
+    """Why the gains are not Hurwitz on the stage's plant (one line), or None when they are.
+
+    Gains that are not stabilising are a failed requirement, not bad input: in a
+    firmware repository that is the change the check exists to catch.
+    """
+    bad = hurwitz_violations(config.plant, gains)
+    if not bad:
+        return None
+    text = ", ".join(f"{float(g):g}" for g in gains)
+    return (
+        f"observer gains l = ({text}) are not Hurwitz on {config.plant.name or 'the plant'} "
+        f"(A = A0 - l C is unstable): they violate {'; '.join(bad)}"
+    )
+
+
+def _failed(config: StageConfig, name: str, limit: Any, why: str) -> Check:
+    """A requirement that fails before anything is computed (value None)."""
+    return Check(_name(config), name, False, None, limit, why)
+
+
 def check_certified(
     config: StageConfig,
     *,
@@ -118,6 +140,10 @@ def check_certified(
         "the certificate check",
         **{"[observer] gains": gains, "[envelope] (or udot_max)": udot_max},
     )
+    why = _not_hurwitz(config, gains)
+    if why is not None:
+        c = _failed(config, "certified", tier or "any", f"no certificate: {why}")
+        return replace(c, details={"report": None, "decay_rate": 0.0})
     rep = certify(config.plant, gains, udot_max=udot_max, dt=dt, decay=decay)
     holding = [c for c in rep.certificates if c.holds]
     if tier is not None:
@@ -236,6 +262,10 @@ def check_tracking(
             "[reference]": config.reference,
         },
     )
+    why = _not_hurwitz(config, config.gains)
+    if why is not None:
+        limits = (("max_me_um", max_me), ("max_maxe_um", max_maxe))
+        return [_failed(config, k, v, f"not simulated: {why}") for k, v in limits if v is not None]
     period = config.reference.period
     duration = duration or max(1.0, 3 * period if period else 1.0)
     plants = _true_plants(config, mismatch)
@@ -310,6 +340,13 @@ def check_margins(
             "[sampling] dt": config.dt,
         },
     )
+    why = _not_hurwitz(config, config.gains)
+    if why is not None:
+        limits = (
+            ("min_gain_margin_db", min_gain_margin_db),
+            ("min_phase_margin_deg", min_phase_margin_deg),
+        )
+        return [_failed(config, k, v, f"not analysed: {why}") for k, v in limits if v is not None]
     ctl = config.controller
     loop = analyze_loop(config.plant, ctl.lambda1, ctl.lambda2, config.gains, dt=config.dt)
     out = []
@@ -356,16 +393,10 @@ def check_requirements(stage: Any) -> list[Check]:
         if "min_decay" in req:
             v = float(c.details["decay_rate"])
             lim = req["min_decay"]
-            out.append(
-                Check(
-                    c.stage,
-                    "min_decay",
-                    v >= lim,
-                    v,
-                    lim,
-                    f"certified decay {v:.4g} 1/s {'>=' if v >= lim else '<'} {lim:g}",
-                )
-            )
+            text = f"certified decay {v:.4g} 1/s {'>=' if v >= lim else '<'} {lim:g}"
+            if c.details["report"] is None:  # nothing was certified: say why
+                text = c.text
+            out.append(Check(c.stage, "min_decay", v >= lim, v, lim, text))
     if "max_me_um" in req or "max_maxe_um" in req:
         out += check_tracking(
             config,

@@ -45,9 +45,10 @@ def _globs(config: pytest.Config) -> list[str]:
     globs = list(config.getoption("bwdesign_configs") or [])
     pyproject = Path(config.rootpath) / "pyproject.toml"
     if not globs and pyproject.is_file():
-        try:
-            table = tomllib.loads(pyproject.read_text()).get("tool", {}).get("bwdesign", {})
-        except tomllib.TOMLDecodeError:
+        try:  # utf-8-sig: as bwdesign reads stage files (a byte-order mark is accepted)
+            text = pyproject.read_bytes().decode("utf-8-sig")
+            table = tomllib.loads(text).get("tool", {}).get("bwdesign", {})
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError):
             table = {}
         found = table.get("configs", [])
         globs = [found] if isinstance(found, str) else list(found)
@@ -116,9 +117,14 @@ class RequirementItem(pytest.Item):
         self.error = error
 
     def runtest(self) -> None:
+        from ..errors import BWDesignError
+
         if self.error is not None:
             raise RequirementFailed(self.error)
-        check = self.parent.checks()[self.key]
+        try:
+            check = self.parent.checks()[self.key]
+        except BWDesignError as err:  # a stage the checks cannot run: a failed item, no traceback
+            raise RequirementFailed(" ".join(str(err).split())) from None
         if not check.passed:
             raise RequirementFailed(check.text)
 
