@@ -253,3 +253,9 @@ def test_the_reports_loop_on_the_stack_stage_with_a_late_step(observer):
     assert rc.tracking_bound >= np.max(sim.maxe)
     assert rc.estimation_bound >= np.nanmax(sim.estimation_maxe[:, 0])
     assert rc.x3_estimation_bound >= np.nanmax(sim.estimation_maxe[:, 2]) > 0.5
+
+
+def test_a_reference_above_nyquist_is_refused():
+    box = UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
+    with pytest.raises(InputError, match="Nyquist"):
+        _certify(preset("paper_experiment"), box, Sine(amplitude=1.0, frequency=3000.0))

@@ -112,7 +112,7 @@ from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_disturbance_gains, check_gains, discrete_gains
-from ..validate import UDOT_MAX, real
+from ..validate import UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction, solution
 from .results import Margin
@@ -329,6 +329,7 @@ def certify_robust(
         raise InputError("uncertainty must be an UncertaintyBox")
     if not isinstance(reference, Reference):
         raise InputError(f"reference must be a bwdesign Reference, got {reference!r}")
+    below_nyquist(reference, dt)
     require_coverable(reference, dt)
     if observer not in ("phso", "phdo"):
         raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
