@@ -25,7 +25,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import bwdesign.output.files as files
+import bwdesign.output.files.directory as directory
 import bwdesign.report.certified as certified
 from bwdesign.cli.main import main
 from bwdesign.errors import OutputError
@@ -261,14 +261,14 @@ def test_disk_full_at_write_time_is_one_error_line(tmp_path, fast_report, monkey
     out = tmp_path / "rep"
     assert report(out) == 0
     before = snapshot(tmp_path)
-    real_write = files._write_new
+    real_write = directory.write_new
 
     def full(path, data):
         if path.name == "report.md":
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         real_write(path, data)
 
-    monkeypatch.setattr(files, "_write_new", full)
+    monkeypatch.setattr(directory, "write_new", full)
     assert report(out) == 2
     assert_one_error(capsys, "No space left on device")
     assert snapshot(tmp_path) == before
@@ -335,7 +335,7 @@ def test_kill_during_the_commit_leaves_a_directory_the_next_run_replaces(tmp_pat
                     os._exit(9)
             real_replace(src, dst)
 
-        files.os.replace = dying_replace
+        os.replace = dying_replace
         with prepare_directory(out, command="report").stage() as st:
             for name in ("a.txt", "b.txt", "c.txt"):
                 st.write_text(name, f"new {name}")
