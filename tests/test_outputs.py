@@ -514,20 +514,28 @@ def test_file_without_comment_syntax_is_never_replaced(tmp_path):
         prepare_file(tmp_path / "x.json", command="t", comment=None)
 
 
-def test_interrupt_mid_report_keeps_the_previous_report(tmp_path, monkeypatch, capsys):
-    """SIGINT (KeyboardInterrupt) while computing: exit 2, previous report whole, no debris."""
+@pytest.mark.parametrize("swallowed", [False, True])
+def test_interrupt_mid_report_keeps_the_previous_report(tmp_path, monkeypatch, capsys, swallowed):
+    """Ctrl-C while computing: exit 130, previous report whole, no debris; also when a
+    library caught the KeyboardInterrupt (the handler recorded it: nothing is committed)."""
     out = tmp_path / "rep"
     monkeypatch.setattr(certified, "build_report", _fake_build)
     assert report(out) == 0
     before = snapshot(tmp_path)
 
     def interrupted(config, out, **kw):
-        _fake_build(config, out, **kw)
-        raise KeyboardInterrupt
+        result = _fake_build(config, out, **kw)
+        (out / "figures" / "b.png").write_bytes(b"\x89PNG new")  # a commit would show
+        try:
+            signal.raise_signal(signal.SIGINT)  # what Ctrl-C does, through main's handler
+        except KeyboardInterrupt:
+            if not swallowed:
+                raise
+        return result
 
     monkeypatch.setattr(certified, "build_report", interrupted)
     capsys.readouterr()
-    assert report(out) == 2
+    assert report(out) == 130
     assert_one_error(capsys, "interrupted")
     assert snapshot(tmp_path) == before
 

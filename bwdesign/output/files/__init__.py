@@ -30,7 +30,9 @@ Directory outputs (``bwdesign report --out DIR``)::
   name, and the next run of the same command removes it (when no process with
   that pid is alive) before it starts; while that pid runs (or if an unrelated
   process reused it) the target is refused, naming the staging directory.
-  The previous output is untouched until the commit.
+  The previous output is untouched until the commit, and there is no commit
+  once the command line recorded a Ctrl-C (:func:`bwdesign.interrupts.check`),
+  even if a library caught the KeyboardInterrupt.
 - Commit (milliseconds, after all work): first a manifest marked
   ``"complete": false`` listing the old and new files (with both checksums),
   then each file moved into place with :func:`os.replace` (each move is

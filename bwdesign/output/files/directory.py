@@ -12,6 +12,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ... import interrupts
 from ..._version import __version__
 from ...errors import OutputError
 from .common import (
@@ -116,6 +117,7 @@ class DirectoryTarget:
                 if not where.startswith(os.path.abspath(root) + os.sep):
                     raise  # not a write of this stage: the writer's own error
                 raise write_error(err, self.what, self.path) from None
+            interrupts.check()  # a Ctrl-C something swallowed: the previous output stays
             try:
                 self._commit(root)
             except OSError as err:

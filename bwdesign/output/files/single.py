@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
+from ... import interrupts
 from ..._version import __version__
 from ...errors import OutputError
 from .common import is_writable, kind_of, lstat_or_none, pid_alive, write_error
@@ -113,6 +114,7 @@ class FileTarget:
                     yield f
                 if self.comment is not None:
                     _fill_digest(tmp)
+                interrupts.check()  # a Ctrl-C something swallowed: the previous file stays
                 st = lstat_or_none(self.path, self.what)
                 if st is not None and not stat.S_ISREG(st.st_mode):
                     raise OutputError(
