@@ -116,6 +116,49 @@ def test_ctrl_c_mid_solve_keeps_the_previous_report(tmp_path):
     assert snapshot(out) == before
 
 
+def _children(pid: int) -> list[tuple[int, str]]:
+    """(pid, command line) of the live processes in session ``pid`` other than itself."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        try:
+            stat = (entry / "stat").read_text()
+            cmd = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except (OSError, ValueError):
+            continue
+        fields = stat.rsplit(")", 1)[1].split()
+        if entry.name.isdigit() and int(fields[3]) == pid and fields[0] != "Z":  # sid, state
+            if int(entry.name) != pid:
+                out.append((int(entry.name), cmd))
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_ctrl_c_while_the_sweep_cluster_starts(tmp_path):
+    """SIGINT to the group as the first Dask worker process starts: no worker prints."""
+    pytest.importorskip("dask.distributed")
+    out = tmp_path / "sweep"
+    before = previous_output(out, "sweep")
+
+    def worker_starting(proc):
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            if any("spawn_main" in cmd for _, cmd in _children(proc.pid)):
+                return ""
+            time.sleep(0.02)
+        raise AssertionError("no Dask worker process started")
+
+    argv = [*MODULE, "sweep", "--config", str(CONFIG), "--samples", "20", "--out", str(out)]
+    code, err, sid = interrupt([*argv, "--workers", "2", "--quiet"], tmp_path, worker_starting)
+    assert_cancelled(code, err)
+    assert err == "error: interrupted\n"
+    assert snapshot(out) == before
+    deadline = time.monotonic() + 20  # the workers were shut down, not orphaned
+    while _children(sid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _children(sid)
+
+
 def test_deferred_holds_sigint_for_the_block_and_its_child_processes():
     reached = False
     with pytest.raises(KeyboardInterrupt):
