@@ -20,16 +20,21 @@ Directory outputs (``bwdesign report --out DIR``)::
   refused, naming one foreign path, unless ``force=True``; even then foreign
   files are kept untouched, only files of the previous manifest whose
   contents are unchanged (or changed, with ``force``) are replaced, and a new
-  file that would land on a foreign path is refused.
+  file that would land on a foreign path is refused. Only ``DIR``'s top level
+  and the directories the manifest's own paths pass through are listed: any
+  other directory is one foreign entry, never entered (``--out /`` lists
+  ``/`` alone), and an entry that vanishes while it is looked at is gone.
 - Refused before work: an empty path, the current directory, a symbolic link,
   anything that is not a directory, a directory (or nearest existing parent)
   that cannot be written (no write permission bit, so also when run as root).
-- Work happens in a staging directory ``DIR/.bwdesign-tmp-<command>-<pid>-<hex>/``.
+- Work happens in a staging directory ``DIR/.bwdesign-tmp-<command>-<pid>@<host>-<hex>/``.
   A run that fails or is interrupted removes it (and ``DIR`` if the run
   created it); a run killed by SIGKILL leaves it behind, recognisable by its
-  name, and the next run of the same command removes it (when no process with
-  that pid is alive) before it starts; while that pid runs (or if an unrelated
-  process reused it) the target is refused, naming the staging directory.
+  name, and the next run of the same command removes it before it starts when
+  it was written on this host by a pid that no longer runs, or is 24 h old
+  (:mod:`.staging`); otherwise (that pid runs, an unrelated process reused
+  it, or the run is on another host sharing the folder) the target is
+  refused, naming the staging directory and its owner.
   The previous output is untouched until the commit, and there is no commit
   once the command line recorded a Ctrl-C (:func:`bwdesign.interrupts.check`),
   even if a library caught the KeyboardInterrupt.
@@ -58,10 +63,11 @@ Single-file outputs (``bwdesign simulate --csv FILE``; stage TOML, C sources)::
   renames their own file).
 - Refused before work: an empty path, a directory, a symbolic link, a FIFO, a
   device or socket, a read-only file, a missing or unwritable parent directory.
-- The file is written under ``.<name>.bwdesign-tmp-<pid>-<hex>`` beside the
-  target, flushed, then moved over it with :func:`os.replace`; on any error
+- The file is written under ``.<name>.bwdesign-tmp-<pid>@<host>-<hex>`` beside
+  the target, flushed, then moved over it with :func:`os.replace`; on any error
   the temporary is removed, and one left by a kill is removed by the next
-  :func:`prepare_file` for the same path.
+  :func:`prepare_file` for the same path (by the same rule as staging
+  directories: this host and a dead pid, or 24 h old).
 
 Written files get the mode the user's umask gives (created with ``0o666``,
 directories ``0o777``, masked). Operating-system failures while writing (disk
@@ -75,9 +81,10 @@ replaced (the window is the commit phase). Hard links are not followed: a
 replaced file that had other links leaves those links with the old contents.
 """
 
-from .common import MANIFEST, STAGING_PREFIX
+from .common import MANIFEST
 from .directory import DirectoryTarget, Stage, prepare_directory
 from .single import FileTarget, prepare_file, signature_line
+from .staging import STAGING_PREFIX
 
 __all__ = [
     "MANIFEST",

@@ -12,14 +12,11 @@ from ...errors import OutputError
 
 __all__ = [
     "MANIFEST",
-    "STAGING_NAME",
-    "STAGING_PREFIX",
     "check_parent",
     "command_slug",
     "is_writable",
     "kind_of",
     "lstat_or_none",
-    "pid_alive",
     "sha256_of",
     "write_error",
     "write_new",
@@ -27,9 +24,6 @@ __all__ = [
 
 #: Name of the manifest a directory output holds.
 MANIFEST = ".bwdesign-manifest.json"
-#: Prefix of staging directories and temporary files.
-STAGING_PREFIX = ".bwdesign-tmp-"
-STAGING_NAME = re.compile(r"^\.bwdesign-tmp-(?P<slug>[A-Za-z0-9-]+?)-(?P<pid>\d+)-[0-9a-f]+$")
 
 
 def command_slug(command: str) -> str:
@@ -38,21 +32,6 @@ def command_slug(command: str) -> str:
     if not slug:
         raise ValueError(f"command must name the writer, got {command!r}")
     return slug
-
-
-def pid_alive(pid: int) -> bool:
-    """A process with this pid runs on this host (this process itself counts as gone)."""
-    if pid == os.getpid():
-        return False  # a leftover of this process (a writer is not re-entered)
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    except OSError:
-        return False
-    return True
 
 
 def is_writable(st: os.stat_result, path: Path) -> bool:

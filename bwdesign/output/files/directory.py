@@ -10,25 +10,23 @@ import shutil
 import stat
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from ... import interrupts
 from ..._version import __version__
 from ...errors import OutputError
 from .common import (
     MANIFEST,
-    STAGING_NAME,
-    STAGING_PREFIX,
     check_parent,
     command_slug,
     is_writable,
     kind_of,
     lstat_or_none,
-    pid_alive,
     sha256_of,
     write_error,
     write_new,
 )
+from .staging import STALE_AFTER_S, leftover, staging_name, staging_owner
 
 __all__ = ["DirectoryTarget", "Stage", "prepare_directory"]
 
@@ -107,7 +105,7 @@ class DirectoryTarget:
         """
         created = self._make_dirs()
         token = secrets.token_hex(4)
-        root = self.path / f"{STAGING_PREFIX}{command_slug(self.command)}-{os.getpid()}-{token}"
+        root = self.path / staging_name(command_slug(self.command), token)
         try:
             try:
                 os.mkdir(root)
@@ -334,39 +332,45 @@ def prepare_directory(
 def _scan(
     target: Path, command: str, listed: dict[str, list[str]], what: str
 ) -> tuple[dict[str, bool], list[str]]:
-    """Classify the directory's contents: replaceable previous files, foreign paths."""
-    slug = command_slug(command)
+    """Classify the directory's contents: replaceable previous files, foreign paths.
+
+    Lists the target's top level and the directories the manifest's own paths
+    pass through, nothing else: any other directory is one foreign entry,
+    never entered (``--out /`` lists ``/`` only). An entry that vanishes while
+    it is looked at (another process's temporary file) is gone, not an error.
+    """
+    own_dirs = {p.as_posix() for rel in listed for p in PurePosixPath(rel).parents[:-1]}
     previous: dict[str, bool] = {}
     foreign: list[str] = []
-    for dirpath, dirnames, filenames in os.walk(target):
-        here = Path(dirpath)
-        if here == target:
-            for name in list(dirnames):
-                m = STAGING_NAME.match(name)
-                if m and m["slug"] == slug and not os.path.islink(here / name):
-                    dirnames.remove(name)
-                    if pid_alive(int(m["pid"])):
-                        raise OutputError(
-                            f"{what} {str(target)!r}: another `bwdesign {command}` (pid "
-                            f"{m['pid']}) is writing into it; wait for it, or remove {name} "
-                            "if no such run exists"
-                        )
-                    shutil.rmtree(here / name, ignore_errors=True)  # a killed run's stage
-        if here != target and not dirnames and not filenames:
-            rel = here.relative_to(target).as_posix()
-            if not any(k.startswith(rel + "/") for k in listed):
-                foreign.append(rel + "/")
-        for name in dirnames + filenames:
-            p = here / name
-            rel = p.relative_to(target).as_posix()
-            if rel == MANIFEST:
+    pending = [""]
+    while pending:
+        rel_dir = pending.pop()
+        here = target / rel_dir
+        try:
+            names = os.listdir(here)
+        except (FileNotFoundError, NotADirectoryError):
+            continue  # gone (or replaced) since it was seen: nothing of it to keep
+        except OSError as err:
+            raise OutputError(
+                f"{what} {str(target)!r}: cannot list {rel_dir or '.'} ({err.strerror})"
+            ) from None
+        for name in names:
+            rel = f"{rel_dir}/{name}" if rel_dir else name
+            if rel == MANIFEST or (not rel_dir and _own_staging(target / name, command, what)):
                 continue
-            st = os.lstat(p)
+            st = lstat_or_none(here / name, what)
+            if st is None:
+                continue  # vanished during the scan
             if stat.S_ISDIR(st.st_mode):
-                continue
-            if rel in listed and stat.S_ISREG(st.st_mode):
+                if rel in own_dirs:
+                    pending.append(rel)
+                else:
+                    foreign.append(rel + "/")
+            elif rel in listed and stat.S_ISREG(st.st_mode):
                 try:
-                    unchanged = sha256_of(p) in listed[rel]
+                    unchanged = sha256_of(here / name) in listed[rel]
+                except FileNotFoundError:
+                    continue  # vanished during the scan
                 except OSError:
                     unchanged = False
                 previous[rel] = unchanged
@@ -375,3 +379,28 @@ def _scan(
             else:
                 foreign.append(rel if stat.S_ISREG(st.st_mode) else f"{rel} ({kind_of(st)})")
     return previous, sorted(foreign)
+
+
+def _own_staging(path: Path, command: str, what: str) -> bool:
+    """``path`` is a staging directory of this command: removed if its run is gone.
+
+    Raises :class:`OutputError` while its run may still be writing (see
+    :mod:`.staging`: another host's run is kept until the stated age).
+    """
+    owner = staging_owner(path.name, command_slug(command))
+    if owner is None:
+        return False
+    st = lstat_or_none(path, what)
+    if st is None:
+        return True  # vanished
+    if not stat.S_ISDIR(st.st_mode):
+        return False  # a link or file under such a name is not ours: foreign
+    if leftover(path, owner):
+        shutil.rmtree(path, ignore_errors=True)  # a killed run's stage
+        return True
+    hours = STALE_AFTER_S / 3600
+    raise OutputError(
+        f"{what} {str(path.parent)!r}: another `bwdesign {command}` ({owner.describe()}) may be "
+        f"writing into it; wait for it, or remove {path.name} if no such run exists "
+        f"(bwdesign removes it itself once it is {hours:g} h old)"
+    )

@@ -16,7 +16,8 @@ from typing import IO
 from ... import interrupts
 from ..._version import __version__
 from ...errors import OutputError
-from .common import is_writable, kind_of, lstat_or_none, pid_alive, write_error
+from .common import is_writable, kind_of, lstat_or_none, write_error
+from .staging import file_temporary_name, leftover, temporary_owner
 
 __all__ = ["FileTarget", "prepare_file", "signature_line"]
 
@@ -104,7 +105,7 @@ class FileTarget:
         The signature line is already written when the block starts.
         """
         token = secrets.token_hex(4)
-        tmp = self.path.parent / f".{self.path.name}.bwdesign-tmp-{os.getpid()}-{token}"
+        tmp = self.path.parent / file_temporary_name(self.path.name, token)
         try:
             try:
                 fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
@@ -224,16 +225,15 @@ def _writable_file(st: os.stat_result, path: Path) -> bool:
 
 
 def _clear_stale(target: Path) -> None:
-    """Remove temporaries of ``target`` left by killed runs (their pid is gone)."""
+    """Remove temporaries of ``target`` left by killed runs (see :func:`.staging.leftover`)."""
     parent = target.parent if str(target.parent) else Path(".")
-    pattern = re.compile(rf"^\.{re.escape(target.name)}\.bwdesign-tmp-(\d+)-[0-9a-f]+$")
     try:
         names = os.listdir(parent)
     except OSError:
         return
     for name in names:
-        m = pattern.match(name)
-        if m and not pid_alive(int(m[1])):
+        owner = temporary_owner(name, target.name)
+        if owner is not None and leftover(parent / name, owner):
             p = parent / name
             with contextlib.suppress(OSError):
                 if stat.S_ISREG(os.lstat(p).st_mode):
