@@ -17,6 +17,11 @@ this process raises it when the block ends.
 
 Outside :func:`handling` (bwdesign used as a library) nothing is recorded:
 Python's own handling applies, and :func:`check` never raises.
+
+Limit: a Ctrl-C while the interpreter itself starts (its ``site`` import, the
+first ~20-50 ms, before any bwdesign code runs) is Python's: it prints a
+traceback. From ``import bwdesign.cli`` on (about 20 ms more: ``import
+bwdesign`` loads its API on first use) the entry points handle it.
 """
 
 from __future__ import annotations
