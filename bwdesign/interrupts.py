@@ -88,12 +88,16 @@ def handling(*, then_ignore: bool = False) -> Iterator[None]:
     if _recorded is not None or not _main_thread():
         yield
         return
-    previous: Any = signal.signal(signal.SIGINT, _on_sigint)
+    previous: Any = signal.getsignal(signal.SIGINT)
     _recorded = []
     try:
+        signal.signal(signal.SIGINT, _on_sigint)
         yield
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN if then_ignore else previous)
+        if then_ignore:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        else:  # None: a handler not set from Python, which cannot be put back
+            signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
         _recorded = None
 
 

@@ -197,8 +197,8 @@ def main(argv: Sequence[str] | None = None, *, then_ignore_sigint: bool = False)
     output stays untouched. ``then_ignore_sigint``: the process exits after
     this (the console script), so SIGINT is ignored once the command ended.
     """
-    with interrupts.handling(then_ignore=then_ignore_sigint):
-        try:
+    try:
+        with interrupts.handling(then_ignore=then_ignore_sigint):
             try:
                 args = build_parser().parse_args(argv)
                 code = args._run(args)
@@ -207,21 +207,21 @@ def main(argv: Sequence[str] | None = None, *, then_ignore_sigint: bool = False)
                 raise
             interrupts.check()
             return code
-        except KeyboardInterrupt:
-            return interrupted()
-        except NotCertifiedError as err:
-            print("not certified: " + " ".join(str(err).split()), file=sys.stderr)
-            return EXIT_NO
-        except BWDesignError as err:
-            text = " ".join(str(err).split())
-            if len(text) > MAX_ERROR_CHARS:  # e.g. a huge list quoted from a config file
-                text = text[: MAX_ERROR_CHARS - 3] + "..."
-            print("error: " + text, file=sys.stderr)
-            return EXIT_BAD_INPUT
-        except BrokenPipeError:
-            # the reader went away (e.g. `bwdesign ... --json | head`): stop quietly
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            return EXIT_NO
+    except KeyboardInterrupt:
+        return interrupted()
+    except NotCertifiedError as err:
+        print("not certified: " + " ".join(str(err).split()), file=sys.stderr)
+        return EXIT_NO
+    except BWDesignError as err:
+        text = " ".join(str(err).split())
+        if len(text) > MAX_ERROR_CHARS:  # e.g. a huge list quoted from a config file
+            text = text[: MAX_ERROR_CHARS - 3] + "..."
+        print("error: " + text, file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except BrokenPipeError:
+        # the reader went away (e.g. `bwdesign ... --json | head`): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_NO
 
 
 def interrupted() -> int:
