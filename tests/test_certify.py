@@ -2,6 +2,8 @@
 
 import json
 import math
+import os
+import signal
 import threading
 
 import numpy as np
@@ -303,12 +305,21 @@ def test_solver_failure_is_reported(experiment, monkeypatch):
 
 
 class _FakeProblem:
+    """A cvxpy problem (and its solving chain) as lmi.solve uses it: compile, solve, unpack."""
+
     def __init__(self, status=None, error=None):
         self.status, self.error, self.value = status, error, 0.0
 
-    def solve(self, solver, **kwargs):
+    def get_problem_data(self, solver, solver_opts=None):
         if self.error is not None:
             raise self.error
+        return {}, self, {}
+
+    def solve_via_data(self, problem, data, warm_start=False, verbose=False, solver_opts=None):
+        return {"info": {"status_val": 2}}
+
+    def unpack_results(self, raw, chain, inverse):
+        pass
 
 
 def test_lmi_solve_accepts_only_optimal():
@@ -317,6 +328,30 @@ def test_lmi_solve_accepts_only_optimal():
     assert sol.attempts == ("CLARABEL: optimal_inaccurate", "SCS: optimal_inaccurate")
     sol = lmi_mod.solve(_FakeProblem(error=ZeroDivisionError("boom")), {})
     assert not sol.ok and sol.status == "solver_error" and "boom" in sol.attempts[0]
+
+
+def test_a_ctrl_c_scs_catches_itself_cancels(monkeypatch):
+    """SCS answers SIGINT with its own status (a "solver error" to cvxpy): it must raise."""
+    import cvxpy as cp
+    import scs
+
+    real, seen = scs.solve, []
+
+    def solve_then_interrupt(*args, **kwargs):  # SIGINT 0.2 s into the real SCS solve
+        threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT)).start()
+        out = real(*args, **kwargs)
+        seen.append(out["info"]["status_val"])
+        return out
+
+    monkeypatch.setattr(scs, "solve", solve_then_interrupt)
+    monkeypatch.setattr(lmi_mod, "SOLVERS", ("SCS",))
+    n = 30  # SCS needs its 50 000 iterations (~20 s) here: the SIGINT lands mid-solve
+    X = cp.Variable((n, n), symmetric=True)
+    C = np.random.default_rng(0).standard_normal((n, n))
+    problem = cp.Problem(cp.Minimize(cp.trace((C + C.T) @ X)), [X >> 0, cp.trace(X) == 1])
+    with pytest.raises(KeyboardInterrupt):
+        lmi_mod.solve(problem, {"X": X})
+    assert seen == [-5]  # SCS_SIGINT: SCS caught it, lmi raised it
 
 
 # -- synthesis -------------------------------------------------------------------------------

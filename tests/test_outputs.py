@@ -25,7 +25,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import bwdesign.output.files as files
+import bwdesign.output.files.directory as directory
+import bwdesign.output.files.staging as files_staging
 import bwdesign.report.certified as certified
 from bwdesign.cli.main import main
 from bwdesign.errors import OutputError
@@ -261,14 +262,14 @@ def test_disk_full_at_write_time_is_one_error_line(tmp_path, fast_report, monkey
     out = tmp_path / "rep"
     assert report(out) == 0
     before = snapshot(tmp_path)
-    real_write = files._write_new
+    real_write = directory.write_new
 
     def full(path, data):
         if path.name == "report.md":
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
         real_write(path, data)
 
-    monkeypatch.setattr(files, "_write_new", full)
+    monkeypatch.setattr(directory, "write_new", full)
     assert report(out) == 2
     assert_one_error(capsys, "No space left on device")
     assert snapshot(tmp_path) == before
@@ -292,29 +293,122 @@ def _dead_pid() -> int:
     return p.pid
 
 
-def test_stale_staging_of_a_killed_run_is_cleared(tmp_path, fast_report):
-    out = tmp_path / "rep"
-    assert report(out) == 0
-    stale = out / f".bwdesign-tmp-report-{_dead_pid()}-deadbeef"
-    (stale / "figures").mkdir(parents=True)
-    (stale / "figures" / "half.png").write_bytes(b"half")
-    assert report(out) == 0
-    no_debris(tmp_path)
+@pytest.fixture
+def owner_pid():
+    """``pid("dead")``: a pid no process has; ``pid("alive")``: a sleeping child's."""
+    children = []
+
+    def pid(state):
+        if state == "dead":
+            return _dead_pid()
+        children.append(subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]))
+        return children[-1].pid
+
+    yield pid
+    for child in children:
+        child.kill()
+        child.wait()
 
 
-def test_staging_of_a_live_run_is_respected(tmp_path, fast_report, capsys):
+#: (host, pid, age in hours, removed by the next run): this host, another host sharing
+#: the folder, and a name from before hosts were recorded (None)
+OWNERS = [
+    ("this", "dead", 0, True),  # a killed run here
+    ("this", "alive", 0, False),  # a run here still writing
+    ("other", "dead", 0, False),  # another host's run: a pid says nothing here
+    ("other", "alive", 25, True),  # ... until nothing changed it for 24 h
+    (None, "dead", 0, False),
+    (None, "dead", 25, True),
+]
+
+
+def _owned(host, pid):
+    here = files_staging.this_host()
+    return f"{pid}@{here}" if host == "this" else f"{pid}@other-host.lan" if host else f"{pid}"
+
+
+@pytest.mark.parametrize("host, state, hours, removed", OWNERS)
+def test_staging_is_removed_only_when_its_run_is_gone(
+    tmp_path, fast_report, capsys, owner_pid, host, state, hours, removed
+):
     out = tmp_path / "rep"
     assert report(out) == 0
-    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
-    try:
-        live = out / f".bwdesign-tmp-report-{other.pid}-0123abcd"
-        live.mkdir()
+    staging = out / f".bwdesign-tmp-report-{_owned(host, owner_pid(state))}-deadbeef"
+    (staging / "figures").mkdir(parents=True)
+    (staging / "figures" / "half.png").write_bytes(b"half")
+    old = time.time() - hours * 3600
+    os.utime(staging, (old, old))
+    capsys.readouterr()
+    if removed:
+        assert report(out) == 0
+        no_debris(tmp_path)
+    else:
         assert report(out) == 2
-        assert_one_error(capsys, f"pid {other.pid}")
-        assert live.is_dir()
-    finally:
-        other.kill()
-        other.wait()
+        who = {"this": files_staging.this_host(), "other": "other-host.lan"}.get(host)
+        assert_one_error(capsys, staging.name, who or "unrecorded host", "24 h")
+        assert (staging / "figures" / "half.png").read_bytes() == b"half"
+
+
+@pytest.fixture
+def listed(monkeypatch):
+    """The directories the output layer lists (``os.listdir``), in order."""
+    seen = []
+    real = os.listdir
+
+    def spy(path="."):
+        seen.append(os.path.abspath(path))
+        return real(path)
+
+    monkeypatch.setattr(os, "listdir", spy)
+    return seen
+
+
+def test_only_the_top_level_and_the_manifests_own_directories_are_listed(tmp_path, listed):
+    out = tmp_path / "rep"
+    with prepare_directory(out, command="report").stage() as st:
+        st.write_text("figures/a.png", "ours")
+    (out / "big" / "deep" / "deeper").mkdir(parents=True)
+    (out / "big" / "deep" / "deeper" / "x.txt").write_bytes(USER_BYTES)
+    (out / "figures" / "sub").mkdir()  # inside a directory the manifest names
+    listed.clear()
+    with pytest.raises(OutputError, match=r"holds big/ \(and 1 more\)"):
+        prepare_directory(out, command="report")
+    assert listed == [str(out), str(out / "figures")]  # big/ and figures/sub/ not entered
+    (out / "big" / "deep" / "deeper" / "x.txt").unlink()
+    for d in ("big/deep/deeper", "big/deep", "big"):
+        (out / d).rmdir()
+    with pytest.raises(OutputError, match=r"holds figures/sub/, which"):
+        prepare_directory(out, command="report")
+
+
+def test_the_filesystem_root_is_refused_from_its_top_level(listed):
+    """``export-c --out /`` walked the whole filesystem (a /proc/.../fd traceback)."""
+    with pytest.raises(OutputError):
+        prepare_directory("/", command="export-c", what="--out")
+    assert set(listed) <= {"/"}  # read only: / holds no bwdesign staging to clear
+
+
+def test_entries_vanishing_during_the_scan_are_gone(tmp_path, monkeypatch):
+    """Another process's temporary file, or a listed file, deleted while bwdesign looks."""
+    out = tmp_path / "rep"
+    with prepare_directory(out, command="report").stage() as st:
+        st.write_text("report.md", "ours")
+    (out / "tmp.swp").write_bytes(b"editor swap file")
+    real_lstat, real_hash = os.lstat, directory.sha256_of
+
+    def vanishing_lstat(path, *a, **k):
+        if Path(path).name == "tmp.swp":
+            os.unlink(path)  # deleted between the listing and the look
+        return real_lstat(path, *a, **k)
+
+    def vanishing_hash(path):
+        os.unlink(path)
+        return real_hash(path)
+
+    monkeypatch.setattr(os, "lstat", vanishing_lstat)
+    monkeypatch.setattr(directory, "sha256_of", vanishing_hash)
+    target = prepare_directory(out, command="report")  # not foreign, not an error
+    assert target.previous == {}  # report.md vanished too: nothing to replace
 
 
 def test_kill_during_the_commit_leaves_a_directory_the_next_run_replaces(tmp_path):
@@ -335,7 +429,7 @@ def test_kill_during_the_commit_leaves_a_directory_the_next_run_replaces(tmp_pat
                     os._exit(9)
             real_replace(src, dst)
 
-        files.os.replace = dying_replace
+        os.replace = dying_replace
         with prepare_directory(out, command="report").stage() as st:
             for name in ("a.txt", "b.txt", "c.txt"):
                 st.write_text(name, f"new {name}")
@@ -471,11 +565,18 @@ def test_csv_refuses_empty_path_and_missing_or_locked_parent(tmp_path, capsys):
         locked.chmod(0o755)
 
 
-def test_csv_stale_temporary_of_a_killed_run_is_cleared(tmp_path):
+@pytest.mark.parametrize("host, state, hours, removed", OWNERS)
+def test_csv_temporary_is_removed_only_when_its_run_is_gone(
+    tmp_path, owner_pid, host, state, hours, removed
+):
     csv = tmp_path / "run.csv"
-    stale = tmp_path / f".run.csv.bwdesign-tmp-{_dead_pid()}-cafe0123"
+    stale = tmp_path / f".run.csv.bwdesign-tmp-{_owned(host, owner_pid(state))}-cafe0123"
     stale.write_text("half a csv")
+    old = time.time() - hours * 3600
+    os.utime(stale, (old, old))
     assert simulate_csv(csv) == 0
+    assert stale.exists() is not removed
+    stale.unlink(missing_ok=True)
     no_debris(tmp_path)
 
 
@@ -514,20 +615,28 @@ def test_file_without_comment_syntax_is_never_replaced(tmp_path):
         prepare_file(tmp_path / "x.json", command="t", comment=None)
 
 
-def test_interrupt_mid_report_keeps_the_previous_report(tmp_path, monkeypatch, capsys):
-    """SIGINT (KeyboardInterrupt) while computing: exit 2, previous report whole, no debris."""
+@pytest.mark.parametrize("swallowed", [False, True])
+def test_interrupt_mid_report_keeps_the_previous_report(tmp_path, monkeypatch, capsys, swallowed):
+    """Ctrl-C while computing: exit 130, previous report whole, no debris; also when a
+    library caught the KeyboardInterrupt (the handler recorded it: nothing is committed)."""
     out = tmp_path / "rep"
     monkeypatch.setattr(certified, "build_report", _fake_build)
     assert report(out) == 0
     before = snapshot(tmp_path)
 
     def interrupted(config, out, **kw):
-        _fake_build(config, out, **kw)
-        raise KeyboardInterrupt
+        result = _fake_build(config, out, **kw)
+        (out / "figures" / "b.png").write_bytes(b"\x89PNG new")  # a commit would show
+        try:
+            signal.raise_signal(signal.SIGINT)  # what Ctrl-C does, through main's handler
+        except KeyboardInterrupt:
+            if not swallowed:
+                raise
+        return result
 
     monkeypatch.setattr(certified, "build_report", interrupted)
     capsys.readouterr()
-    assert report(out) == 2
+    assert report(out) == 130
     assert_one_error(capsys, "interrupted")
     assert snapshot(tmp_path) == before
 

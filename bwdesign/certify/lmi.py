@@ -41,6 +41,8 @@ from typing import Any
 import cvxpy as cp
 import numpy as np
 
+from .. import interrupts
+
 __all__ = [
     "LMISolution",
     "SOLVERS",
@@ -158,6 +160,31 @@ def solver_versions() -> dict[str, str]:
     return out
 
 
+#: Status SCS returns when it caught a SIGINT itself (``SCS_SIGINT`` in scs.h);
+#: cvxpy reports it as a solver error.
+_SCS_SIGINT = -5
+
+
+def _solve_once(problem: cp.Problem, solver: str, opts: dict[str, Any]) -> None:
+    """``problem.solve(solver=solver, warm_start=False, **opts)``, but a Ctrl-C always cancels.
+
+    The three public steps of :meth:`cvxpy.Problem.solve` (compile, solve,
+    unpack), so that the solver's raw answer can be read: SCS installs its own
+    SIGINT handler while it runs and answers a Ctrl-C with a status cvxpy calls
+    a solver error, which the fall-back logic would take for a failed solve.
+    A SIGINT during a Clarabel solve reaches Python when the solve returns.
+    """
+    # warm_start=False: a reused (cached) program must give the same answer as a
+    # fresh one, so reports are reproducible bit for bit.
+    data, chain, inverse = problem.get_problem_data(solver, solver_opts=opts)
+    raw = chain.solve_via_data(problem, data, warm_start=False, verbose=False, solver_opts=opts)
+    info = raw.get("info") if isinstance(raw, dict) else None
+    if isinstance(info, dict) and info.get("status_val") == _SCS_SIGINT:
+        interrupts.interrupt()
+    interrupts.check()  # one the handler recorded while a library held it
+    problem.unpack_results(raw, chain, inverse)
+
+
 def solve(
     problem: cp.Problem,
     variables: Mapping[str, cp.Variable],
@@ -191,9 +218,7 @@ def solve(
         try:
             with warnings.catch_warnings(), _quiet_c_output(solver in _NOISY):
                 warnings.simplefilter("ignore")
-                # warm_start=False: a reused (cached) program must give the same
-                # answer as a fresh one, so reports are reproducible bit for bit.
-                problem.solve(solver=solver, warm_start=False, **opts)
+                _solve_once(problem, solver, opts)
         except cp.error.SolverError as err:
             attempts.append(f"{solver}: solver error: {' '.join(str(err).split())[:200]}")
             last_status, last_solver = "solver_error", solver

@@ -12,6 +12,8 @@ from typing import Any, NoReturn
 from ..errors import BWDesignError
 
 EXIT_OK, EXIT_NO, EXIT_BAD_INPUT = 0, 1, 2
+#: Exit code after Ctrl-C (SIGINT): 128 + 2, as shells report a process SIGINT ended.
+EXIT_INTERRUPTED = 130
 
 
 class UsageError(BWDesignError, ValueError):

@@ -2,21 +2,32 @@
 
 Exit codes: 0 success; 1 a well-formed "no" (nothing certified, synthesis
 infeasible); 2 bad input, reported as one ``error:`` line on stderr with no
-traceback and nothing written.
+traceback and nothing written; 130 interrupted (Ctrl-C): one ``error:
+interrupted`` line, the previous output untouched.
+
+Module-level imports stay light (no numpy): each command imports its work when
+it runs, inside :func:`main`, so a Ctrl-C while it loads is handled too.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from .._version import __version__
+from .. import interrupts
 from ..errors import BWDesignError, NotCertifiedError
-from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK, _Parser, add_plant_args
-from .params import _cmd_params
+from .args import (
+    EXIT_BAD_INPUT,
+    EXIT_INTERRUPTED,
+    EXIT_NO,
+    EXIT_OK,
+    _Parser,
+    add_plant_args,
+)
 
 #: Longest error line printed (characters).
 MAX_ERROR_CHARS = 1000
@@ -88,7 +99,12 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 COMMANDS: list[Command] = [
-    ("params", "print a plant's parameters and bounded-class verdict", _params_args, _cmd_params),
+    (
+        "params",
+        "print a plant's parameters and bounded-class verdict",
+        _params_args,
+        _lazy("cli.params", "run_params"),
+    ),
     (
         "certify",
         "check observer gains against an input-rate envelope (four certificate tiers)",
@@ -160,6 +176,8 @@ COMMANDS: list[Command] = [
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .._version import __version__  # importlib.metadata: not before main() runs
+
     parser = _Parser(prog="bwdesign", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"bwdesign {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=_Parser)
@@ -171,11 +189,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the exit code."""
+def main(argv: Sequence[str] | None = None, *, then_ignore_sigint: bool = False) -> int:
+    """Entry point; returns the exit code.
+
+    A Ctrl-C anywhere (also one a library swallowed: see :mod:`bwdesign.interrupts`)
+    ends the command with one ``error: interrupted`` line and exit code 130;
+    outputs are committed only when no interrupt is pending, so the previous
+    output stays untouched. ``then_ignore_sigint``: the process exits after
+    this (the console script), so SIGINT is ignored once the command ended.
+    """
     try:
-        args = build_parser().parse_args(argv)
-        return args._run(args)
+        with interrupts.handling(then_ignore=then_ignore_sigint):
+            try:
+                args = build_parser().parse_args(argv)
+                code = args._run(args)
+            except BaseException:
+                interrupts.check()  # an interrupt that surfaced as another error
+                raise
+            interrupts.check()
+            return code
+    except KeyboardInterrupt:
+        return interrupted()
     except NotCertifiedError as err:
         print("not certified: " + " ".join(str(err).split()), file=sys.stderr)
         return EXIT_NO
@@ -189,6 +223,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         # the reader went away (e.g. `bwdesign ... --json | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_NO
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return EXIT_BAD_INPUT
+
+
+def interrupted() -> int:
+    """Report a Ctrl-C: one ``error: interrupted`` line; returns :data:`EXIT_INTERRUPTED`."""
+    with contextlib.suppress(OSError, ValueError):  # stderr closed: the code still says it
+        print("error: interrupted", file=sys.stderr, flush=True)
+    return EXIT_INTERRUPTED

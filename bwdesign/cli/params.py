@@ -9,8 +9,11 @@ from ..model.summary import plant_summary
 from ..output.jsonenc import dump_json
 from .args import EXIT_OK
 
+__all__ = ["run_params"]
 
-def _cmd_params(args: argparse.Namespace) -> int:
+
+def run_params(args: argparse.Namespace) -> int:
+    """Run ``bwdesign params`` (registered in :mod:`bwdesign.cli.main`)."""
     params = load_plant(args.plant)
     doc = plant_summary(params)
     if args.json:

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import interrupts
 from ..control.controllers import TrackingController
 from ..errors import BWDesignError, InputError, UnboundedModelError
 from ..extras import require
@@ -535,13 +536,16 @@ def _run_dask(spec, pieces, slices, workers, scheduler, retries, timeout, progre
                 ) from None
         else:
             try:
-                cluster = LocalCluster(
-                    n_workers=workers or os.cpu_count() or 1,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=":0",
-                    silence_logs=logging.ERROR,
-                )
+                # the workers never see a Ctrl-C at the terminal (this process closes
+                # them); one during the start is raised once the cluster exists
+                with interrupts.deferred():
+                    cluster = LocalCluster(
+                        n_workers=workers or os.cpu_count() or 1,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=":0",
+                        silence_logs=logging.ERROR,
+                    )
             except Exception as err:  # noqa: BLE001 - no cluster: say so, no traceback
                 raise SweepError(
                     f"could not start a local Dask cluster ({type(err).__name__}: {err}); "
