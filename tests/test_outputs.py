@@ -43,7 +43,7 @@ SIM = [
 ]  # fmt: skip
 
 
-def _fake_build(config, out, *, allow_unbounded=False, quiet=False, date=None):
+def _fake_build(config, out, *, allow_unbounded=False, quiet=False, date=None, out_dir=None):
     """Stand-in for the report's computation: a figure, a document, a verdict."""
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
