@@ -178,8 +178,14 @@ class RankOneFamily:
             b = om[min(i + 1, len(om) - 1)]
             if b <= a:
                 continue
+            # searched in the bracket's own coordinate t in [0, 1]: the bounded search's
+            # tolerance is relative to |x|, which at a resonance of width h far out in
+            # frequency (h << 1e-8 omega, a lightly damped pair) is wider than the peak
             res = minimize_scalar(
-                lambda x: -f(x), bounds=(a, b), method="bounded", options={"xatol": 1e-9 * b}
+                lambda t, a=a, b=b: -f(a + (b - a) * t),
+                bounds=(0.0, 1.0),
+                method="bounded",
+                options={"xatol": 1e-10},
             )
             best = max(best, -float(res.fun), float(vals[i]))
         return best
