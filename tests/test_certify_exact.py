@@ -158,10 +158,11 @@ def test_paper_numbers():
     assert li.max_udot == pytest.approx(155.0286, rel=1e-5)
     assert se.max_udot == pytest.approx(3508.106, rel=1e-5)
     assert sa.max_udot == pytest.approx(4188.99, rel=1e-5)
-    # the lipschitz envelope is the H-infinity one from python-control
-    assert li.max_udot == pytest.approx(
-        lipschitz_envelope(preset("paper_experiment"), PAPER_GAINS), rel=1e-7
-    )
+    # the lipschitz envelope is the H-infinity one from python-control; the stated one is
+    # the largest rate at most 1e-6 below it where a Riccati P passed the outside check
+    hinf = lipschitz_envelope(preset("paper_experiment"), PAPER_GAINS)
+    assert li.details["envelope_estimate"] == pytest.approx(hinf, rel=1e-7)
+    assert hinf * (1 - 2e-6) < li.max_udot < hinf
 
 
 def test_holds_agrees_with_envelope_and_tiers_are_monotone():
