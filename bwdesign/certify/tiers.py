@@ -234,12 +234,13 @@ def _exact_tier(
     ill-conditioned for double precision (``cond u > UNDECIDABLE``).
     """
     cond, damping = claims.conditioning(decay)
-    if cond * _U > UNDECIDABLE:
+    hopeless = cond * _U > UNDECIDABLE  # no P can pass the outside check: not tried
+    if hopeless:
         claims = claims.without_riccati()
     exact_ok = udot_max < envelope
     main: _Check | None = claims.first(udot_max, decay) if exact_ok else None
     source = "kyp" if main is not None else ""
-    if main is None and exact_ok:
+    if main is None and exact_ok and not hopeless:
         main, source = check(), "lmi"
     if main is None or not main.ok:
         for label, cand in candidates:
@@ -290,11 +291,18 @@ def _exact_tier(
             status += f" (at this rate the largest certifiable decay is {best:.4g} 1/s)"
     else:
         rate = None
+        ratio = udot_max / envelope
         status = (
             f"{main.status if main is not None else 'not certified'} (the criterion, "
-            f"evaluated in double precision, holds: udot_max / envelope estimate = "
-            f"{udot_max / envelope:.6g}; no Lyapunov matrix, the Riccati ones included, "
-            f"passed the outside check: {unverified_reason(udot_max / envelope, damping)})"
+            f"evaluated in double precision, holds: udot_max / envelope estimate = {ratio:.6g}; "
+            + (
+                why
+                if hopeless
+                else "no Lyapunov matrix, the Riccati ones included, passed the outside check: "
+                + unverified_reason(ratio, damping)
+                + (f"; {why}" if undecided else "")
+            )
+            + ")"
         )
     max_udot = max(stated or 0.0, udot_max) if holds else stated or 0.0
     return TierCertificate(
