@@ -38,14 +38,19 @@ for ``|u'| <= v`` (``v = udot_max``, V/s). The tiers, weakest first:
     own :func:`bwdesign.observers.discrete_gains`, so the tier certifies exactly
     the gain the sampled :class:`~bwdesign.HysteresisObserver` runs.
 
-Envelopes and decay rates (``lipschitz``, ``sector``, ``sampled``) are exact:
-each tier's perturbation is rank one, so a common quadratic Lyapunov function
-exists exactly when the circle criterion holds (lossless S-procedure, KYP),
-and :mod:`.frequency` evaluates that condition (continuous, or discrete in
-delta form) on a pole-adapted frequency grid refined by Brent. ``max_udot`` is
-the envelope at the requested decay; ``decay_rate`` the largest decay at
-``udot_max`` (``None`` when the tier does not hold). There is no search limit
-(``max_udot_capped`` is always False; ``inf`` means every rate).
+Envelopes and decay rates (``lipschitz``, ``sector``, ``sampled``) come from an
+exact condition: each tier's perturbation is rank one, so a common quadratic
+Lyapunov function exists exactly when the circle criterion holds (lossless
+S-procedure, KYP), and :mod:`.frequency` evaluates that condition (continuous, or
+discrete in delta form) on a pole-adapted frequency grid refined by Brent. That
+evaluation is an estimate in double precision; the stated ``max_udot`` (the
+envelope at the requested decay) and ``decay_rate`` (the largest decay at
+``udot_max``, ``None`` when the tier does not hold) are the largest values at most
+1e-6 below it at which a Riccati Lyapunov matrix passed the outside check, so never
+above the exact ones; none when no value down to half the estimate passes
+(``details.envelope_undecided``, near-marginal poles; see :mod:`.verified`).
+``inf`` means every rate, and is stated only when verified there;
+``max_udot_capped`` marks a rate verified at the search limit instead.
 
 The verdict ``holds`` needs a Lyapunov matrix at ``udot_max`` and the requested
 decay that passed the outside check: first the stabilising solution of the
