@@ -99,6 +99,17 @@ class RankOneFamily:
     def omega_end(self) -> float:
         return math.inf if self.dt is None else math.pi / self.dt
 
+    def stability_radius(self, mu: float) -> float:
+        """``min_omega sigma_min(sigma(omega) I - Ahat)`` over :meth:`grid` (scaled units).
+
+        The smallest perturbation (2-norm) of the scaled nominal matrix that puts a pole
+        on the contour (the decay line or circle), sampled on the pole-adapted grid.
+        """
+        om = self.grid(mu)
+        sig = np.atleast_1d(self._sigma(om, mu))
+        M = sig[:, None, None] * np.eye(3)[None] - self.Ahat[None].astype(complex)
+        return float(np.min(np.linalg.svd(M, compute_uv=False)[:, -1]))
+
     def G(self, omega: np.ndarray, mu: float) -> np.ndarray:
         """``e3' (sigma I - A)^-1 b`` on the contour, in scaled units (``k G = khat Ghat``).
 
@@ -182,7 +193,7 @@ class RankOneFamily:
             # tolerance is relative to |x|, which at a resonance of width h far out in
             # frequency (h << 1e-8 omega, a lightly damped pair) is wider than the peak
             res = minimize_scalar(
-                lambda t, a=a, b=b: -f(a + (b - a) * t),
+                lambda t, a=a, b=b: -_guarded(f, a + (b - a) * t),
                 bounds=(0.0, 1.0),
                 method="bounded",
                 options={"xatol": 1e-10},
@@ -295,6 +306,18 @@ class RankOneFamily:
             else:
                 hi = mid
         return lo
+
+
+#: The value of a refinement objective at a pole exactly on the contour (near-marginal
+#: gains in double precision): the criterion fails there, as badly as it can.
+ON_POLE = 1e300
+
+
+def _guarded(f: Callable[[float], float], x: float) -> float:
+    try:
+        return f(x)
+    except ZeroDivisionError:
+        return ON_POLE
 
 
 def _resolvent(sig: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:

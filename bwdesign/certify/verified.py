@@ -12,8 +12,9 @@ bounds cover the rounding of the error matrix and of the exponential), and that
 rate is a certificate, so it is at most the exact envelope. When no rate down to
 half the estimate passes, the tier states no envelope and says why, with the
 conditioning number of the poles (:func:`continuous_conditioning`,
-:func:`delta_conditioning`): the relative change of their distance to the decay line
-per unit relative change of the matrix. Decay rates are verified the same way.
+:func:`delta_conditioning`): the norm of the error matrix over its distance to a
+matrix with a pole on the decay line, so that round-off of relative size ``u`` is
+``cond u`` of that distance. Decay rates are verified the same way.
 """
 
 from __future__ import annotations
@@ -32,13 +33,13 @@ from .checks import (
     _lipschitz_coefficient,
     _Sampled,
     _Scaled,
-    _similar,
     _verify_lipschitz,
     _verify_sampled,
     _verify_sector,
     rho_exponents,
     sector_interval,
 )
+from .frequency import RankOneFamily, continuous_family, sampled_family
 from .results import _U, K_HAT_CAP, REL_MARGIN
 
 __all__ = [
@@ -58,9 +59,9 @@ __all__ = [
 #: Relative steps below a frequency-domain estimate at which a stated number is tried,
 #: in turn; the first rate (or decay) at which a Lyapunov matrix passes is stated.
 BACKOFF = (1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3, 0.5)
-#: Poles whose round-off displacement (conditioning times the unit round-off) exceeds this
-#: fraction of their distance to the decay line are not tried at all: the outside check
-#: cannot pass there (on the audit's near-marginal cases none passed beyond 2.2e-7).
+#: Poles whose round-off (conditioning times the unit round-off) exceeds this fraction of
+#: their distance to the decay line are not tried at all: the outside check cannot pass
+#: there (calibrated on the audit's near-marginal cases).
 UNDECIDABLE = 1e-6
 
 
@@ -80,37 +81,34 @@ def verified_below(est: float, floor: float, ok: Callable[[float], bool]) -> flo
     return None
 
 
-def _conditioning(A: np.ndarray, lam: np.ndarray, gaps: np.ndarray) -> tuple[float, float]:
-    """``(max_i kappa_i ||A|| / gap_i, min_i gap_i / |lam_i|)`` (``kappa_i``: eigenvalue
-    condition numbers; ``gap_i``: distance of pole ``i`` to the decay line)."""
-    damping = float(np.min(np.abs(gaps) / np.maximum(np.abs(lam), np.finfo(float).tiny)))
-    _, V = np.linalg.eig(A)
-    try:
-        W = np.linalg.inv(V)
-    except np.linalg.LinAlgError:
-        return math.inf, damping
-    kappa = np.linalg.norm(V, axis=0) * np.linalg.norm(W, axis=1)
-    with np.errstate(divide="ignore"):
-        c = kappa * np.linalg.norm(A, 2) / np.abs(gaps)
-    return (float(np.max(c)) if np.all(np.isfinite(c)) else math.inf), damping
+def _conditioning(fam: RankOneFamily, mu: float) -> tuple[float, float]:
+    """``(||Ahat|| / r, min_i gap_i / |lambda_i|)``: ``r`` the distance of the scaled
+    nominal matrix to one with a pole on the contour (:meth:`RankOneFamily.stability_radius`),
+    ``gap_i`` the distance of pole ``i`` to the decay line (delta form: in decay rate)."""
+    lam = fam.poles()
+    if fam.dt is None:
+        gaps = np.abs(lam.real + mu)
+    else:
+        m2 = fam.dt * (2.0 * lam.real + fam.dt * np.abs(lam) ** 2)  # |z|^2 - 1
+        with np.errstate(divide="ignore", invalid="ignore"):
+            decay = np.where(m2 > -1.0, -0.5 * np.log1p(np.maximum(m2, -1.0)) / fam.dt, np.inf)
+        gaps = np.abs(decay - mu)
+    damping = float(np.min(gaps / np.maximum(np.abs(lam), np.finfo(float).tiny)))
+    r = fam.stability_radius(mu)
+    cond = float(np.linalg.norm(fam.Ahat, 2)) / r if r > 0 else math.inf
+    return cond, damping
 
 
 def continuous_conditioning(sc: _Scaled, mu: float) -> tuple[float, float]:
-    """Conditioning of the poles' distance to ``Re s = -mu`` and their relative damping
-    (that distance over ``|lambda|``), continuous tiers (scaled)."""
-    lam = np.linalg.eigvals(sc.Ahat)
-    return _conditioning(sc.Ahat, lam, lam.real + mu / sc.w)
+    """Conditioning of the poles against the decay line ``Re s = -mu`` (the matrix norm over
+    its distance to a matrix with a pole on that line) and their relative damping (distance
+    to that line over ``|lambda|``), continuous tiers."""
+    return _conditioning(continuous_family(sc.Ahat, sc.w), mu)
 
 
 def delta_conditioning(sp: _Sampled, mu: float) -> tuple[float, float]:
     """The same for the sampled tier: the delta-form poles against the circle ``|z| = r``."""
-    Ah = _similar(sp.Ad1, sp.s) / sp.w
-    lam = np.linalg.eigvals(Ah) * sp.w
-    dt = sp.dt
-    m2 = dt * (2.0 * lam.real + dt * np.abs(lam) ** 2)  # |z|^2 - 1
-    with np.errstate(divide="ignore", invalid="ignore"):
-        decay = np.where(m2 > -1.0, -0.5 * np.log1p(np.maximum(m2, -1.0)) / dt, np.inf)
-    return _conditioning(Ah, lam / sp.w, (decay - mu) / sp.w)
+    return _conditioning(sampled_family(sp.Ad1, sp.b, sp.s, sp.w, sp.dt), mu)
 
 
 def undecided_reason(cond: float, mu: float) -> str:
@@ -118,8 +116,8 @@ def undecided_reason(cond: float, mu: float) -> str:
     return (
         "double precision cannot decide this tier's envelope: no Lyapunov matrix passed the "
         "outside check down to half the frequency-domain estimate; round-off in the error "
-        f"matrix moves its poles by up to {cond * _U:.2g} of their distance to "
-        f"the decay line (rate {mu:g} 1/s; conditioning {cond:.3g})"
+        f"matrix is {cond * _U:.2g} of its distance to a matrix with a pole on the decay line "
+        f"(rate {mu:g} 1/s; conditioning {cond:.3g})"
     )
 
 
