@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -104,6 +105,19 @@ def test_near_marginal_envelopes_are_verified_or_refused(name):
             assert 0.9 * exact[cert.name] < cert.max_udot <= exact[cert.name]
     if name in ("damping 1.1e-13", "damping 3.2e-16"):  # beyond what double precision decides
         assert all(c.details["envelope_undecided"] for c in rep.certificates[1:])
+
+
+def test_a_pole_on_the_contour_in_double_precision_is_no_envelope_and_no_exception():
+    """Audit case 55 (damping ~1e-17): the refinement landed exactly on a pole
+    (ZeroDivisionError); now every tier states nothing, without a warning."""
+    p = _stage(4114251.8432454253, 219.68070652306884, 0.13593633287979684, 0.1132345410964841)
+    gains = (6250.649492709174, 58567945.56787978, -100737.4477262991)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rep = certify(p, gains, udot_max=1611.05, decay=1.8674e-14, dt=1.193038254539264e-06)
+    assert not rep.certified and all(c.max_udot == 0.0 for c in rep.certificates)
+    for cert in rep.certificates[1:3]:
+        assert cert.details["envelope_undecided"] and "conditioning" in cert.status
 
 
 def test_stated_decay_rates_hold_exactly():

@@ -114,10 +114,13 @@ class RankOneFamily:
         """``e3' (sigma I - A)^-1 b`` on the contour, in scaled units (``k G = khat Ghat``).
 
         By the adjugate of the 3x3 matrix ``M = sigma I - Ahat`` (entries of order
-        one in the scaled coordinates): ``e3' adj(M) b / det(M)``.
+        one in the scaled coordinates): ``e3' adj(M) b / det(M)``; :data:`ON_POLE` at a
+        pole exactly on the contour.
         """
         sig = np.atleast_1d(self._sigma(omega, mu))
-        return _resolvent(sig, self.Ahat, self.bhat)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            G = _resolvent(sig, self.Ahat, self.bhat)
+        return np.where(np.isfinite(G), G, ON_POLE)
 
     def G1(self, omega: float, mu: float) -> complex:
         """:meth:`G` at one frequency, in plain Python (the refinement's inner loop)."""
@@ -131,7 +134,10 @@ class RankOneFamily:
                 math.exp(a) * math.sin(b),
             )
             sig = e / (self.dt * self.w)
-        return _resolvent_scalar(sig, self._rows, self._b)
+        try:
+            return _resolvent_scalar(sig, self._rows, self._b)
+        except ZeroDivisionError:
+            return complex(ON_POLE)
 
     @functools.cached_property
     def _rows(self) -> tuple[tuple[float, ...], ...]:
@@ -193,7 +199,7 @@ class RankOneFamily:
             # tolerance is relative to |x|, which at a resonance of width h far out in
             # frequency (h << 1e-8 omega, a lightly damped pair) is wider than the peak
             res = minimize_scalar(
-                lambda t, a=a, b=b: -_guarded(f, a + (b - a) * t),
+                lambda t, a=a, b=b: -f(a + (b - a) * t),
                 bounds=(0.0, 1.0),
                 method="bounded",
                 options={"xatol": 1e-10},
@@ -308,16 +314,9 @@ class RankOneFamily:
         return lo
 
 
-#: The value of a refinement objective at a pole exactly on the contour (near-marginal
-#: gains in double precision): the criterion fails there, as badly as it can.
-ON_POLE = 1e300
-
-
-def _guarded(f: Callable[[float], float], x: float) -> float:
-    try:
-        return f(x)
-    except ZeroDivisionError:
-        return ON_POLE
+#: ``G`` at a pole exactly on the contour (near-marginal gains in double precision): large
+#: enough that no rate is certified there, small enough that ``|G|^2`` stays finite.
+ON_POLE = 1e150
 
 
 def _resolvent(sig: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
