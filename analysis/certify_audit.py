@@ -15,6 +15,15 @@ in mpmath (``DPS`` digits):
   ``[-1, 1]`` from its critical points; nominal Schur stability from ``mpmath.eig``;
 - every ``holds`` re-checked: its ``P`` in mpmath (eigenvalues of every LMI block with
   the exact ``F``) and ``udot_max`` below the exact envelope;
+- every stated number re-checked at its own value: each tier's ``max_udot`` must satisfy
+  the exact criterion at that rate (``theorem1``'s the lipschitz one, which it implies),
+  its ``decay_rate`` (and a stated largest decay) the exact criterion at
+  ``(udot_max, rate)``; an overstated envelope or decay fails the audit (exit 1), as do
+  a false hold and an exception that is not a typed refusal;
+- the generator includes lightly damped (damping 1e-9..1e-3), near-marginal
+  (1e-14..1e-9) and beyond-double-precision (1e-18..1e-14) error-pole pairs: there the
+  package must state a verified number or none (``envelope_undecided``), never the
+  double-precision estimate; the exact check adds two digits per decade of damping;
 - the pole-matched ``K`` against Ackermann's formula in mpmath (``DPS_K`` digits);
 - synthesis: every "feasible" answer checked for each requested property (pole
   region, envelope at the requested decay) with the exact criterion; every
@@ -27,25 +36,49 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import statistics
 import sys
 import time
 from pathlib import Path
 
-import mpmath as mp
-import numpy as np
+# One BLAS thread per process, set before numpy loads: every matrix here is 3x3, and BLAS
+# threads contending for shared cores made a 3x3 triangular solve take 2 ms instead of
+# 12 us (the audit's 1000 cases then run several times slower). Workers are processes.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from bwdesign import BoucWenParams, certify, synthesize
-from bwdesign.observers.gains import discrete_gains
+import mpmath as mp  # noqa: E402
+import numpy as np  # noqa: E402
 
-DPS = 40
+from bwdesign import BoucWenParams, GainError, certify, synthesize  # noqa: E402
+from bwdesign.observers.gains import discrete_gains  # noqa: E402
+
+DPS = 50
 DPS_K = 80
 #: A "miss" is a case with udot_max below (1 - MISS_MARGIN) times the exact envelope
 #: where the tier does not hold.
 MISS_MARGIN = 1e-6
 #: Envelopes agree when within this relative error of the exact one.
 ENVELOPE_RTOL = 0.01
-PATTERNS = ("typical", "slow", "fast", "spread", "clustered")
+PATTERNS = (
+    "typical",
+    "slow",
+    "fast",
+    "spread",
+    "clustered",
+    "lightly_damped",
+    "near_marginal",
+    "beyond_double",
+)
+#: Damping range (log10) of the error-pole pair of the hard patterns.
+DAMPING = {
+    "lightly_damped": (-9.0, -3.0),
+    "near_marginal": (-14.0, -9.0),
+    "beyond_double": (-18.0, -14.0),
+}
+#: The tiers of a certify report, weakest first.
+TIERS_AUDITED = ("theorem1", "lipschitz", "sector", "sampled")
 
 
 # -- random cases -----------------------------------------------------------------------
@@ -77,6 +110,11 @@ def random_poles(rng: np.random.Generator, w0: float, pattern: str) -> np.ndarra
         mags = w0 * 10 ** rng.uniform(1, 2.5, 3)
     elif pattern == "spread":
         mags = w0 * 10 ** np.array([rng.uniform(-3, -1), rng.uniform(-0.5, 0.5), rng.uniform(1, 2)])
+    elif pattern in DAMPING:  # a real pole and a pair this close to the imaginary axis
+        m = w0 * 10 ** rng.uniform(-1, 1)
+        zeta = 10 ** rng.uniform(*DAMPING[pattern])
+        pair = m * (-zeta + 1j * math.sqrt(1 - zeta**2))
+        return np.array([-m * 10 ** rng.uniform(-0.5, 0.5), pair, np.conj(pair)])
     else:  # clustered
         mags = w0 * 10 ** rng.uniform(-1, 1) * (1 + 0.01 * rng.uniform(-1, 1, 3))
     if rng.uniform() < 0.5:  # one real pole and a damped pair
@@ -195,7 +233,7 @@ def exact_continuous_envelope(
 
     With ``at``: only whether ``at`` (V/s) is certifiable (bool).
     """
-    with mp.workdps(DPS):
+    with mp.workdps(DPS + _extra_digits(p, g, mu)):
         A = _err_matrix(p, g) + mp.mpf(mu) * mp.eye(3)
         _, d2, d1, d0 = _charpoly3(A)
         if not (d2 > 0 and d0 > 0 and d2 * d1 > d0):
@@ -219,6 +257,20 @@ def exact_continuous_envelope(
             return _cubic_positive(q, mp.mpf(0), mp.inf)
 
         return feasible(at) if at is not None else _bisect(feasible)
+
+
+def _extra_digits(p: BoucWenParams, g, mu: float) -> int:
+    """Two digits per decade of the poles' relative distance to ``Re s = -mu`` beyond 1e-10.
+
+    The circle polynomial's minimum is then a near double root, which cancels about
+    twice that many digits.
+    """
+    with mp.workdps(DPS):
+        lam = mp.eig(_err_matrix(p, g))[0]
+        rel = min(abs(mp.re(x) + mu) for x in lam) / max(abs(x) for x in lam)
+    if rel == 0:
+        return 2 * DPS
+    return max(0, 2 * int(math.ceil(-float(mp.log10(rel)))) - 20)
 
 
 def _pmul(a, b):
@@ -390,6 +442,46 @@ def exact_P_check(p: BoucWenParams, g, cert, udot_max: float, decay: float, K, d
 # -- the campaign ---------------------------------------------------------------------------
 
 
+def exact_hurwitz(p: BoucWenParams, g) -> bool:
+    """Is ``A0 - l C`` Hurwitz for the gains as given (Routh-Hurwitz in mpmath)?"""
+    with mp.workdps(DPS + _extra_digits(p, g, 0.0)):
+        _, d2, d1, d0 = _charpoly3(_err_matrix(p, g))
+        return bool(d2 > 0 and d0 > 0 and d2 * d1 > d0)
+
+
+def _stated_ok(exact_at, stated: float, exact_env: float) -> bool:
+    """Is a stated envelope at most the exact one (decided by the exact criterion at it)?"""
+    if stated <= 0:
+        return True
+    if math.isinf(stated):
+        return math.isinf(exact_env)
+    return bool(exact_at(stated))
+
+
+def _check_claims(p, g, cert, v: float, decay: float, K, dt) -> dict:
+    """The numbers a tier states, each re-checked exactly at its own value."""
+    gam = abs(p.gamma)
+    c = abs(p.beta) + gam
+    sec = (min(0.0, p.beta - gam), max(0.0, p.beta + gam))
+
+    def crit(name: str, rate: float, mu: float) -> bool:
+        if name == "sampled":
+            return bool(exact_sampled(p, K, dt, mu, at=rate))
+        lo, hi = (-c, c) if name in ("lipschitz", "theorem1") else sec
+        return bool(exact_continuous_envelope(p, g, lo, hi, mu, at=rate))
+
+    out = {}
+    if cert.max_udot > 0 and math.isfinite(cert.max_udot):
+        out["envelope_ok"] = crit(cert.name, cert.max_udot, decay)
+    elif math.isinf(cert.max_udot):
+        out["envelope_ok"] = cert.name == "sampled" and math.isinf(exact_sampled(p, K, dt, decay))
+    for key in ("decay_rate", "largest_decay"):
+        mu = cert.decay_rate if key == "decay_rate" else cert.details.get(key)
+        if mu is not None and mu > decay:
+            out[f"{key}_ok"] = crit(cert.name, v, mu)
+    return out
+
+
 def run_case(rng: np.random.Generator, i: int) -> dict:
     p = random_stage(rng)
     pattern = PATTERNS[i % len(PATTERNS)]
@@ -402,6 +494,14 @@ def run_case(rng: np.random.Generator, i: int) -> dict:
     t0, c0 = time.perf_counter(), time.process_time()
     try:
         rep = certify(p, g, udot_max=v, decay=decay, dt=dt, allow_unbounded=True)
+    except GainError as err:  # a typed refusal: right when the gains are not exactly Hurwitz
+        hurwitz = exact_hurwitz(p, g)
+        return {
+            "case": i,
+            "pattern": pattern,
+            "refused": f"{type(err).__name__}: {err}",
+            "exactly_hurwitz": hurwitz,
+        }
     except Exception as err:  # noqa: BLE001 - an exception is a finding, recorded
         return {"case": i, "pattern": pattern, "error": f"{type(err).__name__}: {err}"}
     elapsed = time.perf_counter() - t0
@@ -420,7 +520,13 @@ def run_case(rng: np.random.Generator, i: int) -> dict:
     }
     tiers = {}
     for cert in rep.certificates:
-        row = {"holds": cert.holds, "max_udot": cert.max_udot, "status": cert.status}
+        row = {
+            "holds": cert.holds,
+            "max_udot": cert.max_udot,
+            "decay_rate": cert.decay_rate,
+            "status": cert.status,
+            "undecided": bool(cert.details.get("envelope_undecided", False)),
+        }
         if cert.name in exact:
             env = exact[cert.name]
             row["exact"] = env
@@ -432,11 +538,19 @@ def run_case(rng: np.random.Generator, i: int) -> dict:
                 row["env_rel_err"] = 0.0 if cert.max_udot == 0 else math.inf
             else:
                 row["env_rel_err"] = 0.0 if math.isinf(cert.max_udot) else math.inf
+        claims = _check_claims(p, g, cert, v, decay, K, dt)
+        row["overstated"] = not claims.get("envelope_ok", True)
+        row["decay_overstated"] = not all(
+            claims.get(k, True) for k in ("decay_rate_ok", "largest_decay_ok")
+        )
         if cert.holds:
             ok = exact_P_check(p, g, cert, v, decay, K, dt)
             row["P_exact_ok"] = ok
             row["false_hold"] = row.get("false_hold", False) or not ok
         tiers[cert.name] = row
+    with mp.workdps(DPS + _extra_digits(p, g, 0.0)):
+        ev = mp.eig(_err_matrix(p, g))[0]
+        damping = min(float(-mp.re(x) / abs(x)) for x in ev)
     return {
         "case": i,
         "pattern": pattern,
@@ -448,6 +562,7 @@ def run_case(rng: np.random.Generator, i: int) -> dict:
         "udot_max": v,
         "decay": decay,
         "dt": dt,
+        "damping": damping,
         "lam_dt": float(np.min(np.abs(lam)) * dt),
         "K_rel_err": k_err,
         "time": elapsed,
@@ -566,32 +681,58 @@ def _q(xs: list[float], q: float) -> float:
 
 def summarise(cases: list[dict], synth: list[dict]) -> dict:
     errors = [c for c in cases if "error" in c] + [s for s in synth if "error" in s]
-    cases = [c for c in cases if "error" not in c]
+    refused = [c for c in cases if "refused" in c]
+    cases = [c for c in cases if "error" not in c and "refused" not in c]
     synth = [s for s in synth if "error" not in s]
     out: dict = {
         "cases": len(cases),
         "synthesis_requests": len(synth),
         "exceptions": len(errors),
+        "refused_not_hurwitz": sum(not c["exactly_hurwitz"] for c in refused),
+        "refused_hurwitz": sum(c["exactly_hurwitz"] for c in refused),
         "tiers": {},
     }
-    for tier in ("theorem1", "lipschitz", "sector", "sampled"):
+    for tier in TIERS_AUDITED:
         rows = [c["tiers"][tier] for c in cases if tier in c["tiers"]]
         holds = sum(r["holds"] for r in rows)
-        s = {"holds": holds, "false_holds": sum(r.get("false_hold", False) for r in rows)}
+        s = {
+            "holds": holds,
+            "false_holds": sum(r.get("false_hold", False) for r in rows),
+            "overstated": sum(r["overstated"] for r in rows),
+            "decay_overstated": sum(r["decay_overstated"] for r in rows),
+            "undecided": sum(r["undecided"] for r in rows),
+        }
         if tier != "theorem1":
             certifiable = [r for r in rows if r["exact"] > 0]
             s["certifiable"] = sum(
                 1 for c in cases if c["udot_max"] < c["tiers"][tier]["exact"] * (1 - MISS_MARGIN)
             )
             s["misses"] = sum(r["miss"] for r in rows)
+            s["misses_undecided"] = sum(r["miss"] and r["undecided"] for r in rows)
             s["miss_rate"] = s["misses"] / max(1, s["certifiable"])
-            uncapped = [r for r in certifiable if math.isfinite(r["exact"])]
-            good = sum(r["env_rel_err"] <= ENVELOPE_RTOL for r in uncapped)
+            stated = [r for r in certifiable if math.isfinite(r["exact"]) and not r["undecided"]]
+            good = sum(r["env_rel_err"] <= ENVELOPE_RTOL for r in stated)
             s["envelope_within_1pct"] = good
-            s["envelope_uncapped"] = len(uncapped)
-            s["envelope_within_1pct_fraction"] = good / max(1, len(uncapped))
-            s["envelope_max_rel_err"] = max((r["env_rel_err"] for r in uncapped), default=0.0)
+            s["envelope_stated_finite"] = len(stated)
+            s["envelope_within_1pct_fraction"] = good / max(1, len(stated))
+            s["envelope_max_rel_err"] = max((r["env_rel_err"] for r in stated), default=0.0)
         out["tiers"][tier] = s
+    out["patterns"] = {}
+    for pat in PATTERNS:
+        rows = [c for c in cases if c["pattern"] == pat]
+        out["patterns"][pat] = {
+            "cases": len(rows),
+            "refused": sum(1 for c in refused if c["pattern"] == pat),
+            "overstated": sum(r["overstated"] for c in rows for r in c["tiers"].values()),
+            "undecided": sum(r["undecided"] for c in rows for r in c["tiers"].values()),
+            "misses": sum(r.get("miss", False) for c in rows for r in c["tiers"].values()),
+            "false_holds": sum(
+                r.get("false_hold", False) for c in rows for r in c["tiers"].values()
+            ),
+        }
+    out["failures"] = len(errors) + sum(
+        t["false_holds"] + t["overstated"] + t["decay_overstated"] for t in out["tiers"].values()
+    )
     order = ("theorem1", "lipschitz", "sector")
     out["monotone_violations"] = sum(
         1
@@ -630,35 +771,64 @@ def summarise(cases: list[dict], synth: list[dict]) -> dict:
 
 
 def markdown(summary: dict, args: argparse.Namespace, cases: list[dict]) -> str:
-    cases = [c for c in cases if "error" not in c]
+    cases = [c for c in cases if "error" not in c and "refused" not in c]
+    verdict = "PASSED" if summary["failures"] == 0 else f"FAILED ({summary['failures']} findings)"
     lines = [
         "# Audit of certify and synthesize against an exact check",
         "",
-        f"Seed {args.seed}; {summary['cases']} random certify cases, "
+        f"**{verdict}**: false holds, stated envelopes or decay rates above the exact ones, "
+        "and exceptions that are not typed refusals each fail the audit.",
+        "",
+        f"Seed {args.seed}; {summary['cases']} random certify cases (plus "
+        f"{summary['refused_not_hurwitz'] + summary['refused_hurwitz']} refused), "
         f"{summary['synthesis_requests']} synthesis requests; exact check in mpmath "
-        f"({DPS} digits; K with {DPS_K}). Command: `python analysis/certify_audit.py "
-        f"--seed {args.seed} --cases {args.cases} --synth {args.synth} --workers "
-        f"{args.workers}`. Times are wall-clock per call on the machine that ran it "
-        f"({args.workers} worker processes).",
+        f"({DPS} digits, two more per decade of pole damping below 1e-10; K with {DPS_K}). "
+        f"Command: `python analysis/certify_audit.py --seed {args.seed} --cases {args.cases} "
+        f"--synth {args.synth} --workers {args.workers}`. Times are wall-clock per call on the "
+        f"machine that ran it ({args.workers} worker processes).",
         "",
         "Cases: a1 1e3..1e9, damping 0.01..1, beta 0.03..5, gamma of both signs (|gamma| up to "
-        "1.3 beta), poles typical / slow / fast / spread / clustered, v 1e-3..1e7 V/s, dt "
-        "1 us..1 ms, 30 % with a requested decay.",
+        "1.3 beta), poles typical / slow / fast / spread / clustered, and a real pole with a "
+        "pair of damping 1e-9..1e-3 (lightly damped), 1e-14..1e-9 (near marginal) or "
+        "1e-18..1e-14 (beyond double precision), v 1e-3..1e7 V/s, dt 1 us..1 ms, 30 % with a "
+        "requested decay.",
         "",
-        "| tier | holds | false holds | certifiable | misses | miss rate | envelope within 1 % "
-        "(uncapped) | max envelope error |",
-        "|---|---|---|---|---|---|---|---|",
+        "| tier | holds | false holds | envelope above exact | decay above exact | "
+        "no envelope stated | certifiable | misses (of them, no envelope stated) | miss rate | "
+        "stated envelope within 1 % | max envelope error |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for tier, s in summary["tiers"].items():
+        head = (
+            f"| {tier} | {s['holds']} | {s['false_holds']} | {s['overstated']} | "
+            f"{s['decay_overstated']} | {s['undecided']} "
+        )
         if tier == "theorem1":
-            lines.append(f"| {tier} | {s['holds']} | {s['false_holds']} | - | - | - | - | - |")
+            lines.append(head + "| - | - | - | - | - |")
             continue
         lines.append(
-            f"| {tier} | {s['holds']} | {s['false_holds']} | {s['certifiable']} | {s['misses']} "
+            head + f"| {s['certifiable']} | {s['misses']} ({s['misses_undecided']}) "
             f"| {100 * s['miss_rate']:.2f} % | {s['envelope_within_1pct']} / "
-            f"{s['envelope_uncapped']} ({100 * s['envelope_within_1pct_fraction']:.2f} %) | "
+            f"{s['envelope_stated_finite']} ({100 * s['envelope_within_1pct_fraction']:.2f} %) | "
             f"{s['envelope_max_rel_err']:.2e} |"
         )
+    lines += [
+        "",
+        "| pole pattern | cases | refused (GainError) | tier envelopes above exact | "
+        "no envelope stated | misses | false holds |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for pat, r in summary["patterns"].items():
+        lines.append(
+            f"| {pat} | {r['cases']} | {r['refused']} | {r['overstated']} | {r['undecided']} | "
+            f"{r['misses']} | {r['false_holds']} |"
+        )
+    lines += [
+        "",
+        f"- Refused with GainError: {summary['refused_not_hurwitz']} whose gains are not "
+        f"Hurwitz in exact arithmetic (right), {summary['refused_hurwitz']} that are (a "
+        "refusal, not a claim).",
+    ]
     lines += [
         "",
         f"- Exceptions raised by certify/synthesize: {summary['exceptions']}.",
@@ -689,6 +859,15 @@ def markdown(summary: dict, args: argparse.Namespace, cases: list[dict]) -> str:
             )
         for s in summary["synthesis_infeasible_answers"]:
             lines.append(f"- 'no' answer {s['request']} ({s['binding']}): {s['reason']}")
+    findings = [
+        (c["case"], c["pattern"], tier, r.get("max_udot"), r.get("exact"), r["status"][:100])
+        for c in cases
+        for tier, r in c["tiers"].items()
+        if r.get("false_hold") or r["overstated"] or r["decay_overstated"]
+    ][:20]
+    if findings:
+        lines += ["", "Findings (first 20): case, pattern, tier, stated, exact, status", ""]
+        lines += [f"- {f[0]} {f[1]} {f[2]} {f[3]!r} {f[4]!r}: {f[5]}" for f in findings]
     misses = [
         (c["case"], tier, c["udot_max"], r["exact"], r["status"][:100])
         for c in cases
@@ -726,6 +905,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, default=Path("reports/audit"))
     ap.add_argument("--workers", type=int, default=1, help="worker processes")
     args = ap.parse_args(argv)
+    t_start = time.perf_counter()
     jobs = [("case", args.seed, i, args.search) for i in range(args.cases)]
     jobs += [("synth", args.seed, i, args.search) for i in range(args.synth)]
     if args.workers > 1:
@@ -746,7 +926,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     (args.out / "certify_audit.md").write_text(markdown(summary, args, cases))
     print(markdown(summary, args, cases))
-    return 0
+    print(f"wall time {time.perf_counter() - t_start:.0f} s")
+    return 0 if summary["failures"] == 0 else 1
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ from bwdesign import (
     synthesize,
 )
 from bwdesign.certify import lmi as lmi_mod
-from bwdesign.certify import tiers as tiers_mod
+from bwdesign.certify import verified as verified_mod
 from bwdesign.certify.checks import continuous_equivalent, rho_interval, sector_interval
 from bwdesign.certify.linear import lipschitz_envelope
 from bwdesign.certify.results import TIERS
@@ -288,8 +288,8 @@ def test_solver_failure_is_reported(experiment, monkeypatch):
         assert rep.tier(name).holds and "KYP" in rep.tier(name).status
     assert_certificate_valid(rep)
     # and with those off too, a solver failure is a status, never a "holds"
-    monkeypatch.setattr(tiers_mod, "_kyp_candidates", lambda *a: [])
-    monkeypatch.setattr(tiers_mod, "_dare_candidates", lambda *a: [])
+    monkeypatch.setattr(verified_mod, "_kyp_candidates", lambda *a: [])
+    monkeypatch.setattr(verified_mod, "_dare_candidates", lambda *a: [])
     rep = certify(experiment, PAPER_GAINS, udot_max=EXPERIMENT_ENVELOPE, dt=DT)
     for name in ("lipschitz", "sector", "sampled"):
         cert = rep.tier(name)
@@ -585,7 +585,7 @@ def test_cli_json_stays_clean_when_a_solver_fails(capfd):
     mp.setattr(lmi_mod, "SOLVERS", ("SCS",))
     mp.setattr(lmi_mod, "_OPTIONS", {"SCS": {"max_iters": 1}})
     mp.setattr(lmi_mod, "_LOCAL", threading.local())
-    mp.setattr(tiers_mod, "_kyp_candidates", lambda *a: [])  # no Riccati P: the LMI must run
+    mp.setattr(verified_mod, "_kyp_candidates", lambda *a: [])  # no Riccati P: the LMI must run
     argv = ["certify", "--plant", "paper_experiment"]
     argv += ["--gains", "8,64,-512", "--udot-max", "361", "--json"]
     try:

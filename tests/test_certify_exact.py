@@ -158,10 +158,11 @@ def test_paper_numbers():
     assert li.max_udot == pytest.approx(155.0286, rel=1e-5)
     assert se.max_udot == pytest.approx(3508.106, rel=1e-5)
     assert sa.max_udot == pytest.approx(4188.99, rel=1e-5)
-    # the lipschitz envelope is the H-infinity one from python-control
-    assert li.max_udot == pytest.approx(
-        lipschitz_envelope(preset("paper_experiment"), PAPER_GAINS), rel=1e-7
-    )
+    # the lipschitz envelope is the H-infinity one from python-control; the stated one is
+    # the largest rate at most 1e-6 below it where a Riccati P passed the outside check
+    hinf = lipschitz_envelope(preset("paper_experiment"), PAPER_GAINS)
+    assert li.details["envelope_estimate"] == pytest.approx(hinf, rel=1e-7)
+    assert hinf * (1 - 2e-6) < li.max_udot < hinf
 
 
 def test_holds_agrees_with_envelope_and_tiers_are_monotone():
@@ -194,18 +195,20 @@ def test_margins_state_their_sign_convention():
 def audit_subset():
     audit = _audit()
     rng = np.random.default_rng(1911)
-    cases = [audit.run_case(rng, i) for i in range(6)]
+    # one case of every pole pattern, the lightly damped and near-marginal ones included
+    cases = [audit.run_case(rng, i) for i in range(len(audit.PATTERNS))]
     synth = [audit.run_synthesis(rng, i, 10) for i in range(2)]
     return audit.summarise(cases, synth)
 
 
 def test_audit_subset_exact(audit_subset):
     s = audit_subset
-    assert s["exceptions"] == 0
+    assert s["exceptions"] == 0 and s["failures"] == 0
     for tier, row in s["tiers"].items():
-        assert row["false_holds"] == 0, tier
-        if tier != "theorem1":
-            assert row["misses"] == 0, tier
+        assert row["false_holds"] == 0 and row["overstated"] == 0, tier
+        assert row["decay_overstated"] == 0, tier
+        if tier != "theorem1":  # a miss only where double precision states no envelope
+            assert row["misses"] == row["misses_undecided"], tier
             assert row["envelope_within_1pct_fraction"] == 1.0, tier
     assert s["monotone_violations"] == 0
     assert s["K_rel_err_max"] < 1e-9

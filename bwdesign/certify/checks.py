@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -273,42 +273,109 @@ def _verify_lipschitz(
     return _verdict(margins, P, solver, t)
 
 
-def _kyp_candidates(sc: _Scaled, k1: float, k2: float, mu: float) -> list[np.ndarray]:
+#: State weights ``eps I`` of the first Riccati candidates (scaled units).
+KYP_EPS = (1e-2, 1e-4, 1e-6, 1e-9)
+#: The same for the discrete Riccati equation of the sampled tier.
+DARE_EPS = (1e-4, 1e-7, 1e-10)
+#: Weights ``eta`` of the modal state weight ``eta gap^2 H`` (see :func:`_kyp_candidates`).
+KYP_MODAL = (1.0, 0.1, 1e-2, 1e-3, 1e-4, 1e-6)
+#: Decay shifts of the last Riccati candidates, as fractions of ``gap``.
+KYP_SHIFTS = (1e-2, 1e-4)
+
+
+def modal_metric(A: np.ndarray) -> np.ndarray | None:
+    """``H = T^-T T^-1`` (norm 1) for the real modal basis ``T`` of ``A``; ``None`` if defective.
+
+    In the modal coordinates every pole's own block is a scaled rotation, so ``H`` weighs
+    a lightly damped pair's plane evenly, however the original coordinates distort it.
+    """
+    lam, V = np.linalg.eig(A)
+    cols: list[np.ndarray] = []
+    used: set[int] = set()
+    for i, x in enumerate(lam):
+        if i in used:
+            continue
+        used.add(i)
+        if x.imag == 0:
+            cols.append(V[:, i].real)
+            continue
+        j = min(
+            (k for k in range(len(lam)) if k not in used), key=lambda k: abs(lam[k] - x.conjugate())
+        )
+        used.add(j)
+        cols += [V[:, i].real, V[:, i].imag]
+    T = np.array(cols).T
+    if T.shape != A.shape or np.linalg.cond(T) > 1e8:
+        return None
+    Ti = np.linalg.inv(T)
+    H = Ti.T @ Ti
+    return (H + H.T) / (2 * np.linalg.norm(H, 2))
+
+
+def _kyp_candidates(sc: _Scaled, k1: float, k2: float, mu: float) -> Iterator[np.ndarray]:
     """Lyapunov matrices from the KYP Riccati equation of the sector ``[k1, k2]`` (1/s).
 
     The S-procedure inequality with multiplier 1,
     ``He(P A_mu) + (P e3 - s e3)(e3' P - s e3') - k1 k2 e3 e3' < 0`` with
-    ``s = (k1 + k2)/2``, holds with ``-eps I`` on the right for the stabilising
+    ``s = (k1 + k2)/2``, holds with ``-W`` on the right for the stabilising
     solution of the Riccati equation
     ``A_mu' P + P A_mu - (P B + S)(-1)^-1 (B' P + S') + Q = 0``, ``B = e3``,
-    ``S = -s e3``, ``Q = -k1 k2 e3 e3' + eps I`` (scipy's
+    ``S = -s e3``, ``Q = -k1 k2 e3 e3' + W`` (scipy's
     :func:`~scipy.linalg.solve_continuous_are` with ``R = -1``), which exists when
-    the circle criterion holds. Solved in the scaled coordinates for a few
-    ``eps``; every candidate is re-checked outside by the caller. The same ``P``
-    serves the lipschitz LMI (``k1 = -L``, ``k2 = L``) and, since the inequality
-    then holds for every ``k`` in ``[k1, k2]``, the sector LMI.
-    """
-    from scipy.linalg import solve_continuous_are
+    the circle criterion holds with room for ``W``. Solved in the scaled coordinates for
 
+    - ``W = eps I`` (:data:`KYP_EPS`);
+    - ``W = eta gap^2 H`` (:data:`KYP_MODAL`), ``H`` the :func:`modal_metric` and
+      ``gap`` the distance of the poles to the line ``Re s = -mu``. For a lightly
+      damped pair ``eps I`` needs ``eps`` below the squared damping (the resonance
+      amplifies it) and leaves a ``P`` so ill-conditioned that round-off swamps its
+      slack; the modal weight scales with the damping and keeps ``P`` even on the pair;
+    - ``W = 0`` at the decay ``mu + f gap`` (:data:`KYP_SHIFTS`), slack ``2 f gap P``.
+
+    Lazy: the caller stops at the first matrix that passes its outside check. The
+    same ``P`` serves the lipschitz LMI (``k1 = -L``, ``k2 = L``) and, since the
+    inequality then holds for every ``k`` in ``[k1, k2]``, the sector LMI.
+    """
     w = sc.w
     A = sc.Ahat + (mu / w) * np.eye(3)
     k1h, k2h = k1 / w, k2 / w
+    if not (math.isfinite(k1h) and math.isfinite(k2h)):
+        return
     sh = (k1h + k2h) / 2
     B = np.array([[0.0], [0.0], [1.0]])
-    out = []
-    for eps in (1e-2, 1e-4, 1e-6, 1e-9):
-        Q = eps * max(1.0, abs(k1h * k2h)) * np.eye(3)
-        Q[2, 2] -= k1h * k2h
-        try:
-            with np.errstate(all="ignore"):
-                X = solve_continuous_are(A, B, Q, -np.ones((1, 1)), s=-sh * B)
-        except (np.linalg.LinAlgError, ValueError):
-            continue
-        if not np.all(np.isfinite(X)):
-            continue
-        X = (X + X.T) / 2
-        out.append(w * X / np.outer(sc.s, sc.s))
-    return out
+    Q0 = np.zeros((3, 3))
+    Q0[2, 2] = -k1h * k2h
+    back = np.outer(sc.s, sc.s) / w
+    for eps in KYP_EPS:
+        X = _care(A, B, Q0 + eps * max(1.0, abs(k1h * k2h)) * np.eye(3), sh)
+        if X is not None:
+            yield X / back
+    gap = -float(np.max(np.linalg.eigvals(A).real))
+    if not gap > 0:
+        return
+    H = modal_metric(A)
+    for eta in KYP_MODAL if H is not None else ():
+        X = _care(A, B, Q0 + eta * gap * gap * H, sh)
+        if X is not None:
+            yield X / back
+    for frac in KYP_SHIFTS:
+        X = _care(A + frac * gap * np.eye(3), B, Q0, sh)
+        if X is not None:
+            yield X / back
+
+
+def _care(A: np.ndarray, B: np.ndarray, Q: np.ndarray, sh: float) -> np.ndarray | None:
+    """The stabilising solution of the KYP Riccati equation (``R = -1``, ``S = -sh B``)."""
+    from scipy.linalg import solve_continuous_are
+
+    try:
+        with np.errstate(all="ignore"):
+            X = solve_continuous_are(A, B, Q, -np.ones((1, 1)), s=-sh * B)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.all(np.isfinite(X)):
+        return None
+    return (X + X.T) / 2
 
 
 def _lipschitz_candidates(P: np.ndarray, L: float) -> list[np.ndarray]:
@@ -374,6 +441,30 @@ class _Sampled:
         """``A_delta(rho)`` (1/s) at ``rho = exp(x)`` (``(rho - 1)/dt = expm1(x)/dt``, exact)."""
         return self.Ad1 + (math.expm1(x) / self.dt) * np.outer(self.b, _E3)
 
+    def delta_error(self, x: float) -> np.ndarray:
+        """Entrywise bound (1/s) on the error of :meth:`delta` against the exact exponential.
+
+        ``(F - I)/dt`` comes from ``expm`` in the scaled coordinates
+        ``(x1, x2/w0, x3)``, where its error is a small multiple of the unit round-off
+        times the norm there (grown by ``1 + ||.|| dt`` for the squarings); ``F[0]`` is
+        ``e1 + dt (F - I)[0]/dt``; ``Ad1 = (F - I)/dt - (K/dt) F[0]`` and the ``rho``
+        column are rounded once more each. :func:`_verify_sampled` adds the effect on
+        its blocks, so a ``P`` that passes is a certificate for the exact exponential.
+        """
+        dt = self.dt
+        T = np.array([1.0, self.w, 1.0])
+        KF = np.outer(self.K / dt, self.F[0])
+        Fd = self.Ad1 + KF  # (F - I)/dt
+        norm_z = float(np.max(np.abs(Fd) * T[None, :] / T[:, None]))  # scaled coordinates
+        E_Fd = (1.0 + norm_z * dt) * norm_z * T[:, None] / T[None, :]
+        E_Fd[2] = 0.0  # the x3 row of F is exactly [0, 0, 1]
+        E_F0 = np.abs(self.F[0]) + dt * E_Fd[0]
+        E_Ad1 = E_Fd + np.outer(np.abs(self.K / dt), E_F0) + np.abs(Fd) + np.abs(KF)
+        g = abs(math.expm1(x)) / dt if math.isfinite(x) else 1.0 / dt
+        col = np.zeros((3, 3))
+        col[:, 2] = g * (np.abs(self.b) + dt * E_Ad1[:, 2])
+        return 64 * _U * (E_Ad1 + col)
+
 
 _E3 = np.array([0.0, 0.0, 1.0])
 
@@ -437,6 +528,9 @@ def _verify_sampled(
         M = D.T @ P + P @ D + dt * (D.T @ P @ D) + c * P
         aD = np.abs(D)
         err = 32 * _U * (aD.T @ aP + aP @ aD + dt * (aD.T @ aP @ aD) + c * aP)
+        E = sp.delta_error(x)  # the exact D is within E of this one, entrywise
+        EP = E.T @ aP
+        err += EP + EP.T + dt * (EP @ (aD + E) + (aD + E).T @ EP.T)
         margins.append(
             _negdef(
                 f"(A_d' P A_d - r^2 P)/dt < 0 at rho = {math.exp(x):.6g} (delta form)",
@@ -447,7 +541,7 @@ def _verify_sampled(
     return _verdict(tuple(margins), P, solver, t)
 
 
-def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> list[np.ndarray]:
+def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> Iterator[np.ndarray]:
     """Lyapunov matrices of the sampled tier from the discrete KYP Riccati equation.
 
     ``k = (1 - rho)/dt`` in ``[k1, k2]`` (1/s); with ``A = A_d(1)/r``,
@@ -455,28 +549,57 @@ def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> list[np.n
     ``[[A'PA - P - kappa1 kappa2 e3 e3', A'Pb - s e3], [., b'Pb - 1]] < 0``
     (``s = (kappa1 + kappa2)/2``) holds for the stabilising solution of
     :func:`~scipy.linalg.solve_discrete_are` with ``R = -1``, ``S = -s e3`` and
-    ``Q = -kappa1 kappa2 e3 e3' + eps I``, when the discrete circle criterion holds.
+    ``Q = -kappa1 kappa2 e3 e3' + W``, when the discrete circle criterion holds. As in
+    :func:`_kyp_candidates`: ``W = eps I``, then ``W = eta gap^2 H`` with the modal
+    metric ``H`` of ``A`` and ``gap = 1 - max |eig(A)|``, then ``W = 0`` with ``r``
+    replaced by ``exp(-(mu + delta) dt)`` (slack ``(r^2 - r_delta^2) P``). Lazy.
     """
+    dt = sp.dt
+    c1, c2 = k1 * dt, k2 * dt
+    if not (math.isfinite(c1) and math.isfinite(c2)):
+        return
+    sh = (c1 + c2) / 2
+    As = _similar(sp.IKC_F, sp.s)
+    back = np.outer(sp.s, sp.s)
+    Q0 = np.zeros((3, 3))
+    Q0[2, 2] = -c1 * c2
+    Ah = As / math.exp(-mu * dt)
+    for eps in DARE_EPS:
+        X = _dare(Ah, Q0 + eps * np.eye(3), sh)
+        if X is not None:
+            yield X / back
+    lam = np.linalg.eigvals(_similar(sp.Ad1, sp.s))  # delta-form poles (z - 1)/dt
+    m2 = float(np.max(dt * (2.0 * lam.real + dt * np.abs(lam) ** 2)))  # max |z|^2 - 1
+    if m2 > -0.5:  # poles near z = 1: their decay from the delta form, without cancellation
+        nominal = -0.5 * math.log1p(m2) / dt
+    else:  # poles far inside the circle (|lambda| dt >> 1): |z| itself is accurate enough
+        zmax = float(np.max(np.abs(np.linalg.eigvals(As))))
+        nominal = -math.log(zmax) / dt if zmax > 0 else math.inf
+    gap = min(nominal - mu, 50.0 / dt)  # 1/s; beyond 50/dt nothing changes in double
+    if not gap > 0:
+        return
+    H = modal_metric(Ah)
+    gd = -math.expm1(-gap * dt)  # 1 - max |eig(Ah)|
+    for eta in KYP_MODAL if H is not None else ():
+        X = _dare(Ah, Q0 + eta * gd * gd * H, sh)
+        if X is not None:
+            yield X / back
+    for frac in KYP_SHIFTS:
+        X = _dare(As / math.exp(-(mu + frac * gap) * dt), Q0, sh)
+        if X is not None:
+            yield X / back
+
+
+def _dare(Ah: np.ndarray, Q: np.ndarray, sh: float) -> np.ndarray | None:
+    """The stabilising solution of the discrete KYP Riccati equation (``b = A e3``)."""
     from scipy.linalg import solve_discrete_are
 
-    dt = sp.dt
-    r = math.exp(-mu * dt)
-    Ah = _similar(sp.IKC_F, sp.s) / r
-    bh = Ah[:, 2:3].copy()
-    c1, c2 = k1 * dt, k2 * dt
-    sh = (c1 + c2) / 2
     e3 = np.array([[0.0], [0.0], [1.0]])
-    out = []
-    for eps in (1e-4, 1e-7, 1e-10):
-        Q = eps * np.eye(3)
-        Q[2, 2] -= c1 * c2
-        try:
-            with np.errstate(all="ignore"):
-                X = solve_discrete_are(Ah, bh, Q, -np.ones((1, 1)), s=-sh * e3)
-        except (np.linalg.LinAlgError, ValueError):
-            continue
-        if not np.all(np.isfinite(X)):
-            continue
-        X = (X + X.T) / 2
-        out.append(X / np.outer(sp.s, sp.s))
-    return out
+    try:
+        with np.errstate(all="ignore"):
+            X = solve_discrete_are(Ah, Ah[:, 2:3].copy(), Q, -np.ones((1, 1)), s=-sh * e3)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.all(np.isfinite(X)):
+        return None
+    return (X + X.T) / 2

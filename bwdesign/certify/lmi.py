@@ -786,35 +786,49 @@ def robust_observer_synthesis(
     return solve(cp.Problem(cp.Minimize(g), cons), variables, first_only=True, options=opts)
 
 
-def theorem1_synthesis(Ahat: np.ndarray, *, mu: float, lmax: float) -> LMISolution:
+def _disk(X: Any, XA: Any, r: float | None, t: Any = 0.0) -> list[Any]:
+    """``[[-r X, X A], [A' X, -r X]] <= -t I``: the eigenvalues of ``A`` in ``|s| < r``."""
+    return [] if r is None else [_sym(cp.bmat([[-r * X, XA], [XA.T, -r * X]])) << -t * np.eye(6)]
+
+
+def theorem1_synthesis(
+    Ahat: np.ndarray, *, mu: float, lmax: float, radius: float | None = None
+) -> LMISolution:
     """Gains for Theorem 1 (sign corrected) in scaled coordinates: least ``||X||``.
 
     ``He(X Ahat - Z e1') + 2 mu X <= -I``, ``p/100 I <= X <= p I``, ``||Z|| <= lmax p``
-    (so the scaled gain ``||X^-1 Z|| <= 100 lmax``);
-    minimises ``p`` (then ``l = X^-1 Z``). Variables ``X`` (3 x 3), ``Z`` (3,), ``p``.
+    (so the scaled gain ``||X^-1 Z|| <= 100 lmax``), and with ``radius`` the poles of
+    ``Ahat - X^-1 Z e1'`` in ``|s| <= radius`` (:func:`_disk`); minimises ``p`` (then
+    ``l = X^-1 Z``). Variables ``X`` (3 x 3), ``Z`` (3,), ``p``.
     """
     X = cp.Variable((3, 3), symmetric=True)
     Z = cp.Variable((3, 1))
     p = cp.Variable()
     C = np.array([[1.0, 0.0, 0.0]])
-    He = X @ Ahat + Ahat.T @ X - Z @ C - C.T @ Z.T + 2 * mu * X
+    XA = X @ Ahat - Z @ C
+    He = XA + XA.T + 2 * mu * X
     cons = [X >> (p / 100.0) * _I3, X << p * _I3, _sym(He) << -_I3, cp.norm(Z) <= lmax * p]
+    cons += _disk(X, XA, radius)
     return solve(cp.Problem(cp.Minimize(p), cons), {"X": X, "Z": Z, "p": p})
 
 
-def lipschitz_synthesis(Ahat: np.ndarray, *, L: float, mu: float, lmax: float) -> LMISolution:
+def lipschitz_synthesis(
+    Ahat: np.ndarray, *, L: float, mu: float, lmax: float, radius: float | None = None
+) -> LMISolution:
     """Feasibility of the lipschitz S-procedure LMI in ``(X, Z = X l)`` (scaled coordinates).
 
     ``[[He(X Ahat - Z e1') + 2 mu X + L^2 e3 e3' + t I, X e3], [e3' X, -1 + t]] <= 0``,
-    ``I <= X <= p I``, ``||Z|| <= lmax p``; maximises the margin ``t`` (certified when
-    ``t > 0``).
+    ``I <= X <= p I``, ``||Z|| <= lmax p``, with ``radius`` the pole disk with margin
+    ``t`` (:func:`_disk`); maximises the margin ``t`` (certified when ``t > 0``).
     """
     X = cp.Variable((3, 3), symmetric=True)
     Z = cp.Variable((3, 1))
     t = cp.Variable()
     C = np.array([[1.0, 0.0, 0.0]])
-    He = X @ Ahat + Ahat.T @ X - Z @ C - C.T @ Z.T + 2 * mu * X + L**2 * (_E3 @ _E3.T)
+    XA = X @ Ahat - Z @ C
+    He = XA + XA.T + 2 * mu * X + L**2 * (_E3 @ _E3.T)
     M = cp.bmat([[He + t * _I3, X @ _E3], [_E3.T @ X, cp.reshape(t - 1, (1, 1), order="C")]])
     p = cp.Variable()
     cons = [X >> _I3, X << p * _I3, cp.norm(Z) <= lmax * p, _sym(M) << 0, t <= 1.0]
+    cons += _disk(X, XA, radius, t)
     return solve(cp.Problem(cp.Maximize(t), cons), {"X": X, "Z": Z, "t": t})

@@ -90,15 +90,19 @@ class TierCertificate:
         The requested decay rate (1/s).
     max_udot : float
         The largest ``|u'|`` bound (V/s) this tier certifies for these gains with
-        the requested decay: exact from the frequency-domain condition (circle
-        criterion, see :mod:`bwdesign.certify.frequency`) for ``lipschitz``,
-        ``sector`` and ``sampled``; closed form for ``theorem1``.
-        0 when nothing is certified; ``inf`` when the tier provably holds for
-        every rate (``sampled`` with ``beta >= |gamma|``, where the jump-map
-        slope stays in ``[0, 1]`` and the LMI holds on that whole interval).
+        the requested decay: for ``lipschitz``, ``sector`` and ``sampled`` the
+        frequency-domain condition (circle criterion, see
+        :mod:`bwdesign.certify.frequency`) backed off until a Lyapunov matrix passes
+        the outside check there (at most 1e-6 below it for well-conditioned poles;
+        :mod:`bwdesign.certify.verified`), so never above the exact envelope;
+        closed form for ``theorem1``. 0 when nothing is certified (and when double
+        precision cannot decide it: ``details["envelope_undecided"]``); ``inf`` when
+        the tier is verified for every rate (``sampled`` with ``beta >= |gamma|``,
+        where the jump-map slope stays in ``[0, 1]`` and the LMI holds on that
+        whole interval).
     max_udot_capped : bool
-        True when the tier still held at the search limit: the true envelope is
-        at least ``max_udot`` (the LMI may hold for every rate).
+        True when the tier was verified at the search limit only: the true envelope
+        is at least ``max_udot`` (the criterion may hold for every rate).
     decay_rate : float or None
         The largest certified exponential rate ``mu`` (1/s) at ``udot_max``:
         ``||eps(t)|| <= c exp(-mu t) ||eps(0)||``; ``None`` when the tier does

@@ -98,8 +98,11 @@ def synthesize(
     tier : {"theorem1", "lipschitz", "sector", "sampled"}, optional
         The tier to synthesise for; default ``sector`` without ``dt``, ``sampled``
         with it (the behaviour above). ``theorem1`` and ``lipschitz`` are the
-        continuous LMIs of :mod:`bwdesign.certify.tier_synthesis` (no pole region;
-        ``max_udot`` is the envelope the synthesised gains reach).
+        continuous LMIs of :mod:`bwdesign.certify.tier_synthesis` (``max_udot`` is
+        the envelope the synthesised gains reach): a given ``pole_radius`` is an LMI
+        constraint and is measured on the gains (no default region for them), and
+        ``dt`` adds the discrete gains and the ``sampled`` re-certification, which
+        feasibility then needs too.
 
     Returns
     -------
@@ -125,23 +128,32 @@ def synthesize(
     decay = real(decay, "decay (1/s)", within=DECAY)
     if dt is not None:
         dt = check_sample_time(params, dt)
-    R = (
-        default_pole_radius(params, dt)
-        if pole_radius is None
-        else real(pole_radius, "pole_radius (rad/s)", within=POLE_RADIUS)
-    )
+    if pole_radius is not None:
+        pole_radius = real(pole_radius, "pole_radius (rad/s)", within=POLE_RADIUS)
+    R = default_pole_radius(params, dt) if pole_radius is None else pole_radius
     if tier is not None and tier not in ("theorem1", "lipschitz", "sector", "sampled"):
         raise InputError(f"unknown tier {tier!r}; tiers are theorem1, lipschitz, sector, sampled")
     if tier in ("theorem1", "lipschitz"):
         from .tier_synthesis import synthesize_tier
 
         return synthesize_tier(
-            params, tier, udot_max=udot_max, decay=decay, allow_unbounded=allow_unbounded
+            params,
+            tier,
+            udot_max=udot_max,
+            decay=decay,
+            pole_radius=pole_radius,
+            dt=dt,
+            allow_unbounded=allow_unbounded,
         )
     if tier == "sampled" and dt is None:
         raise InputError("the sampled tier needs the sample time dt (s)")
     if dt is None or tier == "sector":
-        return _synthesize_continuous(params, udot_max, decay, R, allow_unbounded)
+        res = _synthesize_continuous(params, udot_max, decay, R, allow_unbounded)
+        if dt is None:
+            return res
+        from .tier_synthesis import recertify_sampled
+
+        return recertify_sampled(res, dt, allow_unbounded)
     return _synthesize_sampled(params, udot_max, decay, R, dt, allow_unbounded)
 
 

@@ -19,6 +19,12 @@ has O(1) entries for every stage (a1 spans 1e3..1e9).
     (``mu^ = mu/w0``, ``L^ = L/w0``), bisected on ``L`` for the largest feasible;
     the gains are re-certified by :func:`certify`'s ``lipschitz`` tier (exact).
 
+A ``pole_radius`` is a constraint of either LMI (the error poles in the disk
+``|s| <= R``, with the same ``X``) and is measured on the returned gains outside the
+solver (``pole_check``); without one there is no pole region. A ``dt`` maps the gains
+to the discrete gain the sampled observer runs (pole matching, as every tier does) and
+re-certifies them with the ``sampled`` tier; feasible then needs that tier too.
+
 Every ``X`` is re-checked with ``numpy.linalg.eigvalsh`` outside the solver; solver
 trouble is never a design.
 """
@@ -26,6 +32,7 @@ trouble is never a design.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -35,7 +42,7 @@ from .checks import _lipschitz_coefficient
 from .results import Margin, SynthesisResult
 from .tiers import certify
 
-__all__ = ["synthesize_tier"]
+__all__ = ["synthesize_tier", "recertify_sampled"]
 
 #: Bound on the scaled gain ``||Z|| <= LMAX ||X||`` (``l^ = X^-1 Z`` in units of ``w0``):
 #: the analogue of the default pole radius ``10 sqrt(a1)``.
@@ -60,7 +67,7 @@ def _cl(params: BoucWenParams, gains, w0: float, s: np.ndarray) -> np.ndarray:
     return s[:, None] * A / s[None, :] / w0
 
 
-def _refused(params, tier, udot_max, decay, status) -> SynthesisResult:
+def _refused(params, tier, udot_max, decay, R, dt, status) -> SynthesisResult:
     return SynthesisResult(
         feasible=False,
         tier=tier,
@@ -68,8 +75,8 @@ def _refused(params, tier, udot_max, decay, status) -> SynthesisResult:
         discrete_gains=None,
         udot_max=udot_max,
         decay=decay,
-        pole_radius=math.inf,
-        dt=None,
+        pole_radius=R,
+        dt=dt,
         binding="udot_max",
         reason=f"no {tier} design: {status}",
         max_decay=None,
@@ -82,65 +89,94 @@ def _refused(params, tier, udot_max, decay, status) -> SynthesisResult:
     )
 
 
+def _pole_check(params: BoucWenParams, gains, R: float) -> Margin | None:
+    """The requested pole disk measured on the returned gains (``None``: no disk asked)."""
+    if gains is None or not math.isfinite(R):
+        return None
+    lam = np.linalg.eigvals(error_matrix(params, gains))
+    return Margin("max |lambda| (rad/s)", float(np.max(np.abs(lam))), R)
+
+
+def _theorem1(params, w0, s, Ahat, c, udot_max, mu, radius):
+    """``(gains, envelope, margin, solver, status)`` of the Theorem-1 synthesis."""
+    from . import lmi
+
+    sol = lmi.theorem1_synthesis(Ahat, mu=mu, lmax=LMAX, radius=radius)
+    if not sol.ok:
+        return None, 0.0, None, sol.solver, sol.status
+    X = (np.asarray(sol["X"]) + np.asarray(sol["X"]).T) / 2
+    gains = _gains(X, np.asarray(sol["Z"]), w0, s)
+    Acl = _cl(params, gains, w0, s)
+    M = X @ Acl + Acl.T @ X + 2 * mu * X
+    q = -float(np.linalg.eigvalsh((M + M.T) / 2).max())
+    nX = float(np.linalg.eigvalsh(X).max())
+    pos = float(np.linalg.eigvalsh(X).min()) > 0
+    # outside check: envelope w0 q / (2 c ||X||) in the scaled norm
+    envelope = w0 * q / (2 * c * nX) if (pos and q > 0 and c > 0) else 0.0
+    margin = Margin("2 L ||X|| < w0 q (scaled norm)", 2 * c * udot_max * nX, w0 * q)
+    return gains, envelope, margin, sol.solver, sol.status
+
+
+def _lipschitz(w0, s, Ahat, c, udot_max, mu, radius):
+    """``(gains, solver, status)`` of the lipschitz synthesis (bisection on ``L``)."""
+    from . import lmi
+
+    def feasible(L: float):
+        sol = lmi.lipschitz_synthesis(Ahat, L=L / w0, mu=mu, lmax=LMAX, radius=radius)
+        return sol if sol.ok and float(sol["t"]) > 0 else None
+
+    lo, hi, best = 0.0, c * udot_max, None
+    while (cand := feasible(hi)) is not None and hi < 1e6 * w0:
+        lo, best, hi = hi, cand, hi * 4
+    for _ in range(30):
+        if hi / max(lo, 1e-300) < 1.01:
+            break
+        mid = math.sqrt(lo * hi) if lo > 0 else hi / 4
+        cand = feasible(mid)
+        if cand is not None:
+            lo, best = mid, cand
+        else:
+            hi = mid
+    if best is None:
+        return None, "", "infeasible at every L tried"
+    X = (np.asarray(best["X"]) + np.asarray(best["X"]).T) / 2
+    return _gains(X, np.asarray(best["Z"]), w0, s), best.solver, best.status
+
+
 def synthesize_tier(
     params: BoucWenParams,
     tier: str,
     *,
     udot_max: float,
     decay: float,
+    pole_radius: float | None = None,
+    dt: float | None = None,
     allow_unbounded: bool = False,
 ) -> SynthesisResult:
-    """Synthesise gains for ``tier`` in ``("theorem1", "lipschitz")`` (see the module doc)."""
-    from . import lmi
+    """Synthesise gains for ``tier`` in ``("theorem1", "lipschitz")`` (see the module doc).
 
+    ``pole_radius`` (rad/s), when given, is a constraint of the LMI (the error poles
+    in ``|s| <= pole_radius``) and is measured on the returned gains (``pole_check``);
+    without it there is no pole region (the LMIs bound the scaled gain instead).
+    ``dt`` (s) maps the gains to the discrete gain the sampled observer runs and
+    re-certifies them with the ``sampled`` tier too; feasible needs both to hold.
+    """
     w0, s, Ahat = _scaled(params)
     c = _lipschitz_coefficient(params)
     mu = decay / w0
-    gains = None
-    envelope = 0.0
+    R = math.inf if pole_radius is None else float(pole_radius)
+    radius = None if pole_radius is None else R / w0
     margin: Margin | None = None
-    solver, status = "", ""
-    if tier == "theorem1":
-        sol = lmi.theorem1_synthesis(Ahat, mu=mu, lmax=LMAX)
-        solver, status = sol.solver, sol.status
-        if sol.ok:
-            X = (np.asarray(sol["X"]) + np.asarray(sol["X"]).T) / 2
-            gains = _gains(X, np.asarray(sol["Z"]), w0, s)
-            try:
-                Acl = _cl(params, gains, w0, s)
-            except ValueError as err:  # gains out of the supported range: not a design
-                return _refused(params, tier, udot_max, decay, f"{sol.status}; {err}")
-            M = X @ Acl + Acl.T @ X + 2 * mu * X
-            q = -float(np.linalg.eigvalsh((M + M.T) / 2).max())
-            nX = float(np.linalg.eigvalsh(X).max())
-            pos = float(np.linalg.eigvalsh(X).min()) > 0
-            # outside check: envelope w0 q / (2 c ||X||) in the scaled norm
-            envelope = w0 * q / (2 * c * nX) if (pos and q > 0 and c > 0) else 0.0
-            margin = Margin("2 L ||X|| < w0 q (scaled norm)", 2 * c * udot_max * nX, w0 * q)
-    else:
-
-        def feasible(L: float):
-            sol = lmi.lipschitz_synthesis(Ahat, L=L / w0, mu=mu, lmax=LMAX)
-            return sol if sol.ok and float(sol["t"]) > 0 else None
-
-        lo, hi, best = 0.0, c * udot_max, None
-        while (cand := feasible(hi)) is not None and hi < 1e6 * w0:
-            lo, best, hi = hi, cand, hi * 4
-        for _ in range(30):
-            if hi / max(lo, 1e-300) < 1.01:
-                break
-            mid = math.sqrt(lo * hi) if lo > 0 else hi / 4
-            cand = feasible(mid)
-            if cand is not None:
-                lo, best = mid, cand
-            else:
-                hi = mid
-        if best is not None:
-            solver, status = best.solver, best.status
-            X = (np.asarray(best["X"]) + np.asarray(best["X"]).T) / 2
-            gains = _gains(X, np.asarray(best["Z"]), w0, s)
+    try:
+        if tier == "theorem1":
+            gains, envelope, margin, solver, status = _theorem1(
+                params, w0, s, Ahat, c, udot_max, mu, radius
+            )
         else:
-            status = "infeasible at every L tried"
+            gains, solver, status = _lipschitz(w0, s, Ahat, c, udot_max, mu, radius)
+            envelope = 0.0
+    except ValueError as err:  # gains out of the supported range: not a design
+        return _refused(params, tier, udot_max, decay, R, dt, str(err))
     report = None
     if gains is not None:
         try:
@@ -149,7 +185,8 @@ def synthesize_tier(
                 gains,
                 udot_max=udot_max,
                 decay=decay,
-                tiers=(tier,),
+                dt=dt,
+                tiers=(tier,) if dt is None else (tier, "sampled"),
                 allow_unbounded=allow_unbounded,
             )
         except ValueError as err:  # the gains break the Hurwitz conditions: not a design
@@ -157,24 +194,46 @@ def synthesize_tier(
             gains = None
     if tier == "lipschitz" and report is not None:
         envelope = report.tier("lipschitz").max_udot
+    return _conclude(
+        params, tier, gains, report, envelope, margin, (udot_max, decay, R, dt), solver, status
+    )
+
+
+def _conclude(params, tier, gains, report, envelope, margin, request, solver, status):
+    udot_max, decay, R, dt = request
     holds = gains is not None and udot_max < envelope
     if tier == "theorem1":
         holds = holds and margin is not None and margin.passed
-    reason = (
-        f"gains {gains} reach |u'| <= {envelope:.6g} V/s for the {tier} tier"
-        if gains is not None
-        else f"no {tier} design: {status}"
-    )
+    disk = _pole_check(params, gains, R)
+    binding = None if holds else "udot_max"
+    if gains is not None:
+        reason = f"gains {gains} reach |u'| <= {envelope:.6g} V/s for the {tier} tier"
+    elif math.isfinite(R):  # not even a vanishing envelope fits the disk (and the decay)
+        binding = "pole_radius"
+        reason = f"no {tier} design with poles within {R:g} rad/s, decay >= {decay:g} 1/s: {status}"
+    else:
+        reason = f"no {tier} design: {status}"
+    if holds and disk is not None and not disk.passed:
+        holds, binding = False, "pole_radius"
+        reason += f", but their poles leave the disk: {disk.name} = {disk.value:.6g} >= {R:g}"
+    elif holds and disk is not None:
+        reason += f", poles within {R:g} rad/s (checked: {disk.name} = {disk.value:.6g})"
+    K = None if report is None else report.discrete_gains
+    if holds and dt is not None:
+        smp = report.tier("sampled")
+        reason += f"; the observer sampled at dt = {dt:g} s (K = {K}): {smp.status}"
+        if not smp.holds:
+            holds, binding = False, "verification"
     return SynthesisResult(
         feasible=holds,
         tier=tier,
         gains=gains if holds else None,
-        discrete_gains=None,
+        discrete_gains=K if holds else None,
         udot_max=udot_max,
         decay=decay,
-        pole_radius=math.inf,
-        dt=None,
-        binding=None if holds else "udot_max",
+        pole_radius=R,
+        dt=dt,
+        binding=binding,
         reason=reason,
         max_decay=None,
         max_udot=envelope,
@@ -183,5 +242,26 @@ def synthesize_tier(
         status=status,
         report=report,
         params=params,
-        pole_check=margin,
+        pole_check=disk,
     )
+
+
+def recertify_sampled(res: SynthesisResult, dt: float, allow_unbounded: bool) -> SynthesisResult:
+    """A continuous (``sector``) design run sampled at ``dt``: its discrete gain and the
+    ``sampled`` re-certification, which a feasible answer then needs too."""
+    if not res.feasible:
+        return replace(res, dt=dt)
+    report = certify(
+        res.params,
+        res.gains,
+        udot_max=res.udot_max,
+        decay=res.decay,
+        dt=dt,
+        allow_unbounded=allow_unbounded,
+    )
+    smp = report.tier("sampled")
+    K = report.discrete_gains
+    reason = f"{res.reason}; the observer sampled at dt = {dt:g} s (K = {K}): {smp.status}"
+    if smp.holds:
+        return replace(res, dt=dt, discrete_gains=K, report=report, reason=reason)
+    return replace(res, feasible=False, dt=dt, binding="verification", reason=reason, report=report)

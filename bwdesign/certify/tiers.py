@@ -38,14 +38,19 @@ for ``|u'| <= v`` (``v = udot_max``, V/s). The tiers, weakest first:
     own :func:`bwdesign.observers.discrete_gains`, so the tier certifies exactly
     the gain the sampled :class:`~bwdesign.HysteresisObserver` runs.
 
-Envelopes and decay rates (``lipschitz``, ``sector``, ``sampled``) are exact:
-each tier's perturbation is rank one, so a common quadratic Lyapunov function
-exists exactly when the circle criterion holds (lossless S-procedure, KYP),
-and :mod:`.frequency` evaluates that condition (continuous, or discrete in
-delta form) on a pole-adapted frequency grid refined by Brent. ``max_udot`` is
-the envelope at the requested decay; ``decay_rate`` the largest decay at
-``udot_max`` (``None`` when the tier does not hold). There is no search limit
-(``max_udot_capped`` is always False; ``inf`` means every rate).
+Envelopes and decay rates (``lipschitz``, ``sector``, ``sampled``) come from an
+exact condition: each tier's perturbation is rank one, so a common quadratic
+Lyapunov function exists exactly when the circle criterion holds (lossless
+S-procedure, KYP), and :mod:`.frequency` evaluates that condition (continuous, or
+discrete in delta form) on a pole-adapted frequency grid refined by Brent. That
+evaluation is an estimate in double precision; the stated ``max_udot`` (the
+envelope at the requested decay) and ``decay_rate`` (the largest decay at
+``udot_max``, ``None`` when the tier does not hold) are the largest values at most
+1e-6 below it at which a Riccati Lyapunov matrix passed the outside check, so never
+above the exact ones; none when no value down to half the estimate passes
+(``details.envelope_undecided``, near-marginal poles; see :mod:`.verified`).
+``inf`` means every rate, and is stated only when verified there;
+``max_udot_capped`` marks a rate verified at the search limit instead.
 
 The verdict ``holds`` needs a Lyapunov matrix at ``udot_max`` and the requested
 decay that passed the outside check: first the stabilising solution of the
@@ -68,6 +73,7 @@ divided by ``dt`` (delta form).
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -86,8 +92,6 @@ from .checks import (
     _check_sampled,
     _check_sector,
     _cont_err,
-    _dare_candidates,
-    _kyp_candidates,
     _lipschitz_candidates,
     _lipschitz_coefficient,
     _posdef,
@@ -95,7 +99,6 @@ from .checks import (
     _scale_continuous,
     _Scaled,
     _verify_lipschitz,
-    _verify_sampled,
     _verify_sector,
     rho_exponents,
     rho_interval,
@@ -113,6 +116,15 @@ from .results import (
     _frozen,
 )
 from .robust_observer import certify_robust_observer
+from .verified import (
+    UNDECIDABLE,
+    Claims,
+    lipschitz_claims,
+    sampled_claims,
+    sector_claims,
+    undecided_reason,
+    unverified_reason,
+)
 
 __all__ = ["certify", "certify_discrete"]
 
@@ -188,6 +200,20 @@ def _search_cap(params: BoucWenParams) -> float:
     return K_HAT_CAP * math.sqrt(params.a1) / c if c > 0 else math.inf
 
 
+def _stated_envelope(envelope: float, decay: float, claims: Claims) -> tuple[float | None, bool]:
+    """``(stated, capped)``: the largest verified rate below the estimate ``envelope``.
+
+    ``inf`` only when verified at ``inf``; from an ``inf`` estimate that is not, a rate
+    verified below the tier's search cap (``capped``). ``None``: nothing verified.
+    """
+    if math.isinf(envelope):
+        if claims.ok(math.inf, decay):
+            return math.inf, False
+        stated = claims.stated(claims.cap, 0.0, None, decay)
+        return stated, stated is not None
+    return claims.stated(envelope, 0.0, None, decay), False
+
+
 def _exact_tier(
     name: str,
     *,
@@ -198,68 +224,99 @@ def _exact_tier(
     candidates: Sequence[tuple[str, Callable[[], _Check]]],
     decay_rate: Callable[[], float],
     details: dict[str, Any],
+    claims: Claims,
 ) -> TierCertificate:
-    """A tier whose envelope is exact (frequency domain) and whose verdict is a checked P.
+    """A tier whose envelope comes from the frequency domain and whose verdict is a checked P.
 
     ``holds`` needs a Lyapunov matrix that passed the outside check at
-    ``udot_max`` and ``decay``: the LMI's, or one of the ``candidates`` (matrices
-    of weaker tiers, which are certificates for this tier too). The LMI is
-    solved only when the exact criterion says a certificate exists.
+    ``udot_max`` and ``decay``: the stabilising solution of the tier's KYP Riccati
+    equation (the exact solution of the criterion, ``claims``), the LMI's, or one
+    of the ``candidates`` (matrices of weaker tiers, which are certificates for this
+    tier too). The LMI is solved only when the criterion says a certificate exists.
+    ``envelope`` (the frequency-domain estimate) is never stated itself: the stated
+    ``max_udot`` and ``decay_rate`` are rates at which a Riccati matrix passed the
+    outside check (:mod:`.verified`); none is tried when the poles are too
+    ill-conditioned for double precision (``cond u > UNDECIDABLE``).
     """
+    cond, damping = claims.conditioning(decay)
+    hopeless = cond * _U > UNDECIDABLE  # no P can pass the outside check: not tried
+    if hopeless:
+        claims = claims.without_riccati()
     exact_ok = udot_max < envelope
-    main: _Check | None = None
-    source = ""
-    # the Riccati (KYP) matrices first: no solver, and exact up to round-off
-    for label, cand in candidates:
-        if label == "kyp" and exact_ok:
-            c = cand()
-            if c.ok:
-                main, source = c, label
-                break
-    if main is None and exact_ok:
+    main: _Check | None = claims.first(udot_max, decay) if exact_ok else None
+    source = "kyp" if main is not None else ""
+    if main is None and exact_ok and not hopeless:
         main, source = check(), "lmi"
     if main is None or not main.ok:
         for label, cand in candidates:
-            if label == "kyp":
-                continue
             c = cand()
             if c.ok:
                 main, source = c, label
                 break
+    stated, capped = _stated_envelope(envelope, decay, claims)
     holds = main is not None and main.ok
-    details = {**details, "exact_envelope": envelope, "P_source": source if holds else None}
+    if not holds and stated is not None and stated > udot_max:
+        # a certificate at a larger rate is one at udot_max (the rate intervals are nested)
+        wider = claims.first(stated, decay)
+        again = None if wider is None else claims.check(wider.P, udot_max, decay)
+        if again is not None and again.ok:
+            main, source, holds = again, "kyp", True
+    undecided = envelope > 0 and stated is None
+    details = {
+        **details,
+        "envelope_estimate": envelope,
+        "envelope_conditioning": cond,
+        "pole_damping": damping,
+        "envelope_undecided": undecided,
+        "P_source": source if holds else None,
+    }
     if main is not None and main.t is not None:
         details["lmi_margin"] = main.t
+    why = undecided_reason(cond, decay) if undecided else ""
     if holds:
         status = {
             "lmi": "certified",
             "kyp": "certified (P from the KYP Riccati equation)",
         }.get(source, f"certified (P of the {source} tier)")
-        rate = max(decay, decay_rate())
+        est = max(decay, decay_rate())
+        rate = claims.stated(est, decay, udot_max, None) or decay
+        if undecided:
+            status += f"; no envelope above |u'| <= {udot_max:g} V/s is stated: {why}"
+    elif not exact_ok:
+        rate = None
+        status = (
+            f"not certified: |u'| <= {udot_max:g} V/s is above this tier's envelope at decay "
+            f"{decay:g} 1/s" + (f" (certified up to {stated:.6g} V/s)" if stated else "")
+        )
+        status += f"; {why}" if undecided else ""
+        best_est = decay_rate() if decay > 0 else 0.0
+        best = claims.stated(best_est, 0.0, udot_max, None)
+        if best is not None:
+            details["largest_decay"] = best
+            status += f" (at this rate the largest certifiable decay is {best:.4g} 1/s)"
     else:
         rate = None
-        if not exact_ok:
-            status = (
-                f"not certified: |u'| <= {udot_max:g} V/s is not below this tier's exact "
-                f"envelope {envelope:.6g} V/s at decay {decay:g} 1/s"
+        ratio = udot_max / envelope
+        status = (
+            f"{main.status if main is not None else 'not certified'} (the criterion, "
+            f"evaluated in double precision, holds: udot_max / envelope estimate = {ratio:.6g}; "
+            + (
+                why
+                if hopeless
+                else "no Lyapunov matrix, the Riccati ones included, passed the outside check: "
+                + unverified_reason(ratio, damping)
+                + (f"; {why}" if undecided else "")
             )
-            best = decay_rate() if decay > 0 else 0.0
-            if best > 0:
-                details["largest_decay"] = best
-                status += f" (at this rate the largest certifiable decay is {best:.4g} 1/s)"
-        else:
-            status = (
-                f"{main.status if main is not None else 'not certified'} (the exact criterion "
-                f"holds: udot_max / envelope = {udot_max / envelope:.6g}; no Lyapunov matrix "
-                "passed the outside check)"
-            )
+            + ")"
+        )
+    max_udot = max(stated or 0.0, udot_max) if holds else stated or 0.0
     return TierCertificate(
         name=name,
         holds=holds,
         udot_max=udot_max,
         decay=decay,
-        max_udot=max(envelope, udot_max) if holds else envelope,
-        max_udot_capped=False,
+        max_udot=max_udot,
+        max_udot_capped=capped and max_udot == stated,
         decay_rate=rate,
         P=main.P if holds else None,
         margins=main.margins if main is not None else (),
@@ -286,7 +343,9 @@ def _theorem1(
     def lyap(Qm: np.ndarray) -> np.ndarray:
         rhs = sc.s[:, None] * Qm * sc.s[None, :]
         scale = float(np.abs(rhs).max())
-        X = solve_continuous_lyapunov(sc.Ahat.T, -rhs / scale)
+        with warnings.catch_warnings():  # near-marginal poles: scipy perturbs and warns;
+            warnings.simplefilter("ignore", RuntimeWarning)  # the outside check judges P
+            X = solve_continuous_lyapunov(sc.Ahat.T, -rhs / scale)
         return scale * ((X + X.T) / 2) / np.outer(sc.s, sc.s) / sc.w
 
     P_lyap = lyap(np.eye(3))
@@ -383,7 +442,6 @@ def _circle_envelope(fam: Any, lo: float, hi: float, mu: float, alpha0: float) -
 
 def _continuous_exact(
     name: str,
-    params: BoucWenParams,
     sc: _Scaled,
     udot_max: float,
     decay: float,
@@ -392,6 +450,7 @@ def _continuous_exact(
     check: Callable[[], _Check],
     candidates: Sequence[tuple[str, Callable[[], _Check]]],
     details: dict[str, Any],
+    claims: Claims,
 ) -> TierCertificate:
     fam = continuous_family(sc.Ahat, sc.w)
     alpha0 = -sc.spectral_abscissa()
@@ -408,6 +467,7 @@ def _continuous_exact(
         candidates=candidates,
         decay_rate=rate,
         details=details,
+        claims=claims,
     )
 
 
@@ -417,8 +477,6 @@ def _lipschitz(
     c = _lipschitz_coefficient(params)
     L = c * udot_max
     cands = []
-    for P in _kyp_candidates(sc, -L, L, decay) if udot_max < math.inf else ():
-        cands.append(("kyp", lambda P=P: _verify_lipschitz(sc, L, decay, P, "scipy", None)))
     th = prev.get("theorem1")
     if th is not None and th.holds:
         for P in _lipschitz_candidates(np.asarray(th.P), L):
@@ -427,7 +485,6 @@ def _lipschitz(
             )
     return _continuous_exact(
         "lipschitz",
-        params,
         sc,
         udot_max,
         decay,
@@ -436,6 +493,7 @@ def _lipschitz(
         lambda: _check_lipschitz(sc, L, decay),
         cands,
         {"L": L},
+        lipschitz_claims(params, sc),
     )
 
 
@@ -445,8 +503,6 @@ def _sector(
     k_lo, k_hi = sector_interval(params, udot_max)
     g = abs(params.gamma)
     cands = []
-    for P in _kyp_candidates(sc, k_lo, k_hi, decay):
-        cands.append(("kyp", lambda P=P: _verify_sector(sc, k_lo, k_hi, decay, P, "scipy", None)))
     for name in ("lipschitz", "theorem1"):
         cert = prev.get(name)
         if cert is not None and cert.holds:
@@ -459,7 +515,6 @@ def _sector(
             )
     return _continuous_exact(
         "sector",
-        params,
         sc,
         udot_max,
         decay,
@@ -468,6 +523,7 @@ def _sector(
         lambda: _check_sector(sc, k_lo, k_hi, decay),
         cands,
         {"k_interval": [k_lo, k_hi]},
+        sector_claims(params, sc),
     )
 
 
@@ -500,12 +556,7 @@ def _sampled(
         decay=decay,
         envelope=env,
         check=lambda: _check_sampled(sp, x_lo, x_hi, decay),
-        candidates=[
-            ("kyp", lambda P=P: _verify_sampled(sp, x_lo, x_hi, decay, P, "scipy", None))
-            for P in _dare_candidates(sp, *kfun(udot_max), decay)
-        ]
-        if udot_max < env
-        else (),
+        candidates=(),
         decay_rate=lambda: fam.largest_decay(lambda m: feasible(udot_max, m)),
         details={
             "dt": dt,
@@ -514,6 +565,7 @@ def _sampled(
             "r": math.exp(-decay * dt),
             "nominal_decay": cap,
         },
+        claims=sampled_claims(params, sp),
     )
 
 

@@ -348,7 +348,11 @@ def _print_synthesis(res: SynthesisResult) -> None:
     line = (
         f"request: |u'| <= {res.udot_max:g} {res.params.input_unit}/s, "
         f"decay >= {res.decay:g} 1/s, "
-        f"poles within {res.pole_radius:g} rad/s"
+        + (
+            f"poles within {res.pole_radius:g} rad/s"
+            if math.isfinite(res.pole_radius)
+            else "no pole region"
+        )
     )
     if res.dt is not None:
         line += f", dt = {res.dt:g} s"
