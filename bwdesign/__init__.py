@@ -44,7 +44,13 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     from .certify.tiers import certify, certify_discrete
     from .codegen.export import CExport, export_c
     from .control.analysis import LoopAnalysis, analyze_loop, mismatch_sweep
-    from .control.controllers import DiscreteTrackingController, TrackingController, TuningWarning
+    from .control.controllers import (
+        DiscreteTrackingController,
+        TrackingController,
+        TuningWarning,
+        make_controller,
+    )
+    from .control.loop import ClosedLoop, Start
     from .control.tuning import DigitalTuning, digital_tuning
     from .identify import IdentificationResult, identify
     from .model.config import ControllerSettings, StageConfig, load_config, load_plant
@@ -59,13 +65,14 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
         ExtendedStateObserver,
         HysteresisObserver,
     )
+    from .observers.spec import ObserverSpec
     from .observers.ukf import UnscentedObserver
+    from .sim.batch import BatchResult, simulate_batch
     from .sim.closed_loop import simulate
-    from .sim.continuous import simulate_continuous
+    from .sim.continuous import ContinuousSolver, simulate_continuous
     from .sim.metrics import Metrics, steady_state_window, tracking_metrics
     from .sim.result import SimulationResult
     from .sim.robust_design import RobustDesign, synthesize_robust
-    from .sim.start import start_on_reference
 
 #: Module -> the public names it provides, imported on first access.
 _LAZY: dict[str, tuple[str, ...]] = {
@@ -84,7 +91,13 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".certify.tiers": ("certify", "certify_discrete"),
     ".codegen.export": ("CExport", "export_c"),
     ".control.analysis": ("LoopAnalysis", "analyze_loop", "mismatch_sweep"),
-    ".control.controllers": ("DiscreteTrackingController", "TrackingController", "TuningWarning"),
+    ".control.controllers": (
+        "DiscreteTrackingController",
+        "TrackingController",
+        "TuningWarning",
+        "make_controller",
+    ),
+    ".control.loop": ("ClosedLoop", "Start"),
     ".control.tuning": ("DigitalTuning", "digital_tuning"),
     ".identify": ("IdentificationResult", "identify"),
     ".model.config": ("ControllerSettings", "StageConfig", "load_config", "load_plant"),
@@ -105,13 +118,14 @@ _LAZY: dict[str, tuple[str, ...]] = {
         "ExtendedStateObserver",
         "HysteresisObserver",
     ),
+    ".observers.spec": ("ObserverSpec",),
     ".observers.ukf": ("UnscentedObserver",),
+    ".sim.batch": ("BatchResult", "simulate_batch"),
     ".sim.closed_loop": ("simulate",),
-    ".sim.continuous": ("simulate_continuous",),
+    ".sim.continuous": ("ContinuousSolver", "simulate_continuous"),
     ".sim.metrics": ("Metrics", "steady_state_window", "tracking_metrics"),
     ".sim.result": ("SimulationResult",),
     ".sim.robust_design": ("RobustDesign", "synthesize_robust"),
-    ".sim.start": ("start_on_reference",),
 }
 
 __all__ = [
@@ -145,9 +159,15 @@ __all__ = [
     "TrackingController",
     "DiscreteTrackingController",
     "TuningWarning",
+    "make_controller",
+    "ClosedLoop",
+    "Start",
+    "ObserverSpec",
     "simulate",
-    "start_on_reference",
+    "simulate_batch",
+    "BatchResult",
     "simulate_continuous",
+    "ContinuousSolver",
     "SimulationResult",
     "analyze_loop",
     "mismatch_sweep",

@@ -23,17 +23,20 @@ from __future__ import annotations
 
 import argparse
 import math
+import warnings
 
 import numpy as np
 
+from ..control.controllers import TuningWarning, make_controller
+from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..control.tuning import digital_tuning
 from ..model.config import load_plant
 from ..model.references import Reference, Sine, Step, Triangle
+from ..observers.spec import ObserverSpec
 from ..output.files import FileTarget, prepare_file
 from ..output.jsonenc import dump_json
 from ..sim.closed_loop import simulate
 from ..sim.result import SimulationResult
-from ..sim.start import start_on_reference
 from .args import (
     EXIT_NO,
     EXIT_OK,
@@ -313,26 +316,29 @@ def run_simulate(args: argparse.Namespace) -> int:
     target = None
     if args.csv is not None:
         target = prepare_file(args.csv, command="simulate --csv", what="--csv")
-    start = start_on_reference(params, reference) if args.start_on_reference else {}
-    result = simulate(
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", TuningWarning)
+        controller = make_controller(
+            params, args.lambda1, args.lambda2, form=args.form, dt=args.dt,
+            integral_rate=args.integral_rate, u_limits=u_limits,
+        )  # fmt: skip
+    ukf = args.observer == "ukf"
+    loop = ClosedLoop(
         params,
-        reference,
+        ObserverSpec.of(args.observer, None if ukf else args.gains, udot_max=args.udot_max),
+        controller,
         dt=args.dt,
+        delay=args.delay,
+        start=ON_REFERENCE if args.start_on_reference else Start(),
+        allow_unbounded=args.allow_unbounded,
+    )
+    result = simulate(
+        loop,
+        reference,
         duration=args.duration,
-        observer=args.observer,
-        gains=args.gains,
-        lambda1=args.lambda1,
-        lambda2=args.lambda2,
-        form=args.form,
-        integral_rate=args.integral_rate,
-        u_limits=u_limits,
         true_params=true_params,
         noise_std=args.noise_std,
         seed=args.seed,
-        delay=args.delay,
-        udot_max=args.udot_max,
-        allow_unbounded=args.allow_unbounded,
-        **start,
     )
     if target is not None:
         _write_csv(result, target)

@@ -256,11 +256,8 @@ def _gains(config, source, dt, udot_max):
 
 
 def _limits(ctl) -> tuple[float, float] | None:
-    if ctl is None or (ctl.u_min is None and ctl.u_max is None):
-        return None
-    lo = -math.inf if ctl.u_min is None else ctl.u_min
-    hi = math.inf if ctl.u_max is None else ctl.u_max
-    return (lo, hi)
+    """The stage's input limits (:meth:`ControllerSettings.input_limits`)."""
+    return None if ctl is None else ctl.input_limits()
 
 
 def _summary(

@@ -83,6 +83,14 @@ class ControllerSettings:
     u_min: float | None = None
     u_max: float | None = None
 
+    def input_limits(self) -> tuple[float, float] | None:
+        """``(u_min, u_max)`` for a controller (``-inf``/``inf`` for a missing side), or
+        ``None`` without limits: the one place a stage's amplifier limits are built."""
+        if self.u_min is None and self.u_max is None:
+            return None
+        lo = -math.inf if self.u_min is None else float(self.u_min)
+        return (lo, math.inf if self.u_max is None else float(self.u_max))
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "lambda1": self.lambda1,

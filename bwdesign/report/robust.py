@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..certify.robust import certify_robust
+from ..control.loop import ClosedLoop
 from ..model.config import StageConfig
 from ..sim.robust_design import certified_envelope, simulate_corners
 
@@ -35,18 +36,8 @@ _OBSERVERS = {"phso": "PHSO", "phdo": "PHDO (lumped x3hat + dhat)"}
 def _loop(config: StageConfig, tuning: Any, udot_max: float, observer: str) -> dict[str, Any]:
     params, box, ref, dt = config.plant, config.uncertainty, config.reference, float(config.dt)
     gains = tuning.observer_gains_for(observer)
-    sim = simulate_corners(
-        params,
-        box,
-        ref,
-        dt=dt,
-        gains=gains,
-        lambda1=tuning.lambda1,
-        lambda2=tuning.lambda2,
-        integral_rate=tuning.integral_rate,
-        delay=tuning.delay,
-        observer=observer,
-    )
+    loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
+    sim = simulate_corners(loop, box, ref)
     stable = bool(sim.stable.all())
     rate = float(np.nanmax(sim.input_rate_max)) if stable else math.nan
     env = certified_envelope(udot_max, rate) if stable else udot_max

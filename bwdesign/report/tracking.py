@@ -28,10 +28,9 @@ import numpy as np
 from ..errors import InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope, derive_envelope
-from ..observers.gains import disturbance_gains_from
+from ..control.loop import ClosedLoop
 from ..sim.closed_loop import simulate
 from ..sim.result import SimulationResult
-from ..sim.start import start_on_reference
 from .document import fmt
 
 __all__ = [
@@ -76,14 +75,8 @@ class TrackingRun:
 
 
 def input_limits(config: StageConfig) -> tuple[float, float] | None:
-    """``[controller] u_min, u_max`` as a (lo, hi) pair (input unit; inf for a missing side)."""
-    ctl = config.controller
-    if ctl is None or (ctl.u_min is None and ctl.u_max is None):
-        return None
-    return (
-        -math.inf if ctl.u_min is None else ctl.u_min,
-        math.inf if ctl.u_max is None else ctl.u_max,
-    )
+    """``[controller] u_min, u_max`` (:meth:`ControllerSettings.input_limits`), or None."""
+    return None if config.controller is None else config.controller.input_limits()
 
 
 def required_input(
@@ -134,62 +127,51 @@ def tracking_runs(
     list of TrackingRun
         Each over three reference periods (1 s for a step), sampled at dt,
         nominal plant, no noise, limits ``[controller] u_min/u_max``, starting on
-        the reference (:func:`bwdesign.sim.start_on_reference`).
+        the reference (``ClosedLoop(start="reference")``).
     """
-    params, ref, ctl, dt = config.plant, config.reference, config.controller, float(config.dt)
+    ref, dt = config.reference, float(config.dt)
     duration = 3.0 * ref.period if ref.period is not None else 1.0
-    start = start_on_reference(params, ref)
-    limits = input_limits(config)
-    laws = {
-        "eq. 12": dict(
-            gains=tuple(float(g) for g in gains),
-            lambda1=ctl.lambda1,
-            lambda2=ctl.lambda2,
-            form="continuous",
-            integral_rate=None,
+    loops = {
+        # the report's digital runs are simulated without the tuning's computation delay
+        "eq. 12": lambda obs: ClosedLoop.from_config(
+            config, observer=obs, gains=gains, allow_unbounded=allow_unbounded
         ),
-        "digital tuning": dict(
-            gains=tuple(float(g) for g in tuning.gains),
-            lambda1=float(tuning.lambda1),
-            lambda2=float(tuning.lambda2),
-            form="discrete",
-            integral_rate=None if tuning.integral_rate is None else float(tuning.integral_rate),
-        ),
+        "digital tuning": lambda obs: ClosedLoop.from_config(
+            config, observer=obs, law=tuning, allow_unbounded=allow_unbounded
+        ).replace(delay=False),
     }
     runs = []
-    four = {
-        "eq. 12": disturbance_gains_from(laws["eq. 12"]["gains"]),
-        "digital tuning": tuning.observer_gains_for("phdo"),
-    }
-    for (law, base), observer in product(laws.items(), OBSERVERS):
-        kw = dict(base)
-        if observer == "phdo":
-            kw["gains"] = tuple(float(g) for g in four[law])
-        r = simulate(
-            params,
-            ref,
-            dt=dt,
-            duration=duration,
-            observer=observer,
-            u_limits=limits,
-            allow_unbounded=allow_unbounded,
-            **start,
-            **kw,
+    for (law, make), observer in product(loops.items(), OBSERVERS):
+        loop = make(observer)
+        r = simulate(loop, ref, duration=duration)
+        runs.append(
+            TrackingRun(
+                label=f"{observer.upper()} ({law})",
+                command=tuple(_command(config, loop, duration, allow_unbounded)),
+                result=r,
+            )
         )
-        argv = ["simulate", "--plant", config.source, "--observer", observer]
-        argv += ["--gains", ",".join(_num(g) for g in kw["gains"])]
-        argv += ["--lambda1", _num(kw["lambda1"]), "--lambda2", _num(kw["lambda2"])]
-        argv += ["--form", kw["form"]]
-        if kw["integral_rate"] is not None:
-            argv += ["--integral-rate", _num(kw["integral_rate"])]
-        argv += ["--dt", _num(dt), "--duration", _num(duration), "--start-on-reference"]
-        if limits is not None and all(math.isfinite(v) for v in limits):
-            argv += ["--u-min", _num(limits[0]), "--u-max", _num(limits[1])]
-        # a one-sided limit and the reference come from the file's sections
-        if allow_unbounded:
-            argv.append("--allow-unbounded")
-        runs.append(TrackingRun(label=f"{observer.upper()} ({law})", command=tuple(argv), result=r))
     return runs
+
+
+def _command(config: StageConfig, loop: ClosedLoop, duration: float, unbounded: bool) -> list:
+    """The ``bwdesign simulate`` arguments that rerun ``loop`` (the reference from the file)."""
+    ctrl, dt = loop.controller, loop.dt
+    argv = ["simulate", "--plant", config.source, "--observer", loop.observer.kind]
+    argv += ["--gains", ",".join(_num(g) for g in loop.observer.gains)]
+    argv += ["--lambda1", _num(ctrl.lambda1), "--lambda2", _num(ctrl.lambda2)]
+    discrete = getattr(ctrl, "dt", None) is not None
+    argv += ["--form", "discrete" if discrete else "continuous"]
+    if ctrl.integral_rate is not None:
+        argv += ["--integral-rate", _num(ctrl.integral_rate)]
+    argv += ["--dt", _num(dt), "--duration", _num(duration), "--start-on-reference"]
+    limits = loop.input_limits
+    if limits is not None and all(math.isfinite(v) for v in limits):
+        argv += ["--u-min", _num(limits[0]), "--u-max", _num(limits[1])]
+    # a one-sided limit and the reference come from the file's sections
+    if unbounded:
+        argv.append("--allow-unbounded")
+    return argv
 
 
 def limits_text(limits: Any, iu: str) -> str:

@@ -1,6 +1,9 @@
 """Closed-loop simulation: plant, observer and tracking controller.
 
-Two paths:
+Every simulation takes a :class:`bwdesign.ClosedLoop` (the model, the observer, the
+law, dt, the delay, the start; built once, validated once, e.g.
+:meth:`~bwdesign.ClosedLoop.from_config`) and what the run adds: the reference, the
+duration, the true plant(s), the noise. Two paths:
 
 - :func:`simulate`, the **sampled-data loop** a digital controller runs. The
   plant is the exact ZOH model (:mod:`bwdesign.model.plant`); observer and
@@ -52,10 +55,9 @@ divergence; it never raises.
 
 from .batch import BatchResult, simulate_batch
 from .closed_loop import make_observer, simulate
-from .continuous import simulate_continuous
+from .continuous import ContinuousSolver, simulate_continuous
 from .metrics import Metrics, steady_state_window, tracking_metrics
 from .result import SimulationResult
-from .start import start_on_reference
 
 __all__ = [
     "Metrics",
@@ -67,5 +69,5 @@ __all__ = [
     "BatchResult",
     "make_observer",
     "simulate_continuous",
-    "start_on_reference",
+    "ContinuousSolver",
 ]

@@ -28,20 +28,20 @@ from typing import Any
 
 import numpy as np
 
-from ..control.controllers import TrackingController
+from ..control.loop import ClosedLoop
 from ..errors import InputError
-from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import _check_dt, discretize
+from ..model.params import BoucWenParams
 from ..model.references import Reference
-from ..observers.gains import (
-    check_disturbance_gains,
-    check_gains,
-    discrete_gains,
-    disturbance_discrete_gains,
+from .kernel import (
+    ARRAY,
+    LoopConstants,
+    LoopState,
+    advance,
+    correct,
+    discrete_observer_gains,
+    hysteresis_increment_batch,
 )
-from ..validate import below_nyquist
-from .closed_loop import _diverged, _finite_nonneg, _state
-from .metrics import steady_state_window
+from .run import Run, diverged, prepare, resolve_window
 
 __all__ = ["BatchResult", "simulate_batch", "hysteresis_increment_batch"]
 
@@ -91,47 +91,6 @@ class BatchResult:
         return int(self.stable.size)
 
 
-def hysteresis_increment_batch(alpha, beta, gamma, h, u0, u1):
-    """:func:`bwdesign.hysteresis_increment` over arrays (parameters may be arrays too).
-
-    The same closed form and the same float operations per element; each element
-    evaluates only the branch it ends on (one ``expm1`` and one ``exp``). The rare
-    special cases (``beta = gamma``, a vanishing exponent) are patched by mask, so
-    the common path costs no second evaluation.
-    """
-    h, u0, u1 = np.broadcast_arrays(
-        *(np.atleast_1d(np.asarray(v, dtype=float)) for v in (h, u0, u1))
-    )
-    with np.errstate(all="ignore"):
-        du = u1 - u0
-        s = np.copysign(1.0, du)
-        g = s * h
-        w = np.abs(du)
-        cm = beta - gamma
-        arg = -cm * g / alpha
-        wz = np.log1p(arg) / cm
-        wz[~(arg > -1.0)] = np.inf
-        flat = cm == 0.0
-        if np.any(flat):
-            wz = np.where(flat, -g / alpha, wz)
-        neg = g < 0.0
-        first = neg & (w <= wz)
-        cross = neg & ~first
-        c = np.where(first, cm, beta + gamma)
-        g[cross] = 0.0  # g = s * h is this call's own array
-        w = np.where(cross, w - wz, w)
-        x = c * w
-        frac = -np.expm1(-x) / x
-        small = np.abs(x) < 1e-8
-        if small.any():
-            xs = x[small]
-            frac[small] = 1.0 - xs / 2.0 + xs * xs / 6.0
-        out = s * (g * np.exp(-x) + alpha * w * frac)
-        still = du == 0.0
-        out[still] = h[still]
-        return out
-
-
 def _zoh_batch(a1: np.ndarray, a2: np.ndarray, a3: np.ndarray, dt: float) -> np.ndarray:
     """:func:`bwdesign.model.plant.discretize`'s augmented exponential, stacked (N, 4, 4)."""
     w0 = np.sqrt(a1)
@@ -179,171 +138,135 @@ def _true_matrices(true_params: list[BoucWenParams], dt: float) -> dict[str, np.
 
 
 def _per_scenario(value: Any, n: int, name: str) -> np.ndarray:
-    a = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+    try:
+        a = np.broadcast_to(np.asarray(value, dtype=float), (n,)).copy()
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number or one per scenario ({n})") from None
     if not np.all(np.isfinite(a)) or np.any(a < 0):
         raise InputError(f"{name} must be finite and >= 0 for every scenario")
     return a
 
 
 def simulate_batch(
-    params: BoucWenParams,
+    loop: ClosedLoop,
     reference: Reference,
     true_params: list[BoucWenParams],
     *,
-    dt: float,
     duration: float,
-    controller: TrackingController,
-    observer: str = "phso",
-    gains: Any,
     noise_std: Any = 0.0,
     seeds: Any = 0,
-    delay: bool = False,
-    compensate_delay: bool = True,
-    x0: Any = None,
-    xhat0: Any = None,
-    u_prev: float = 0.0,
     window: Any = None,
-    divergence_limit: float = 1e6,
-    allow_unbounded: bool = False,
 ) -> BatchResult:
-    """Run the sampled tracking loop for every true parameter set in ``true_params``.
+    """Run the sampled loop ``loop`` for every true parameter set in ``true_params``.
 
     Parameters
     ----------
-    params : BoucWenParams
-        The model of the observer and the controller (common to all scenarios).
+    loop : ClosedLoop
+        Model, observer (PHSO, ESO or PHDO; for the PHDO the ``xhat`` metrics are of
+        the lumped ``x3 + d``, which starts from ``xhat0[2]`` with ``d = 0``), law (its
+        ``u_limits``, ``estimate_limits`` and integral action apply; ``hysteresis_jump``
+        is not batched), dt, delay, start: common to every scenario.
     reference : Reference
     true_params : list of BoucWenParams, length N
         The simulated plant of each scenario.
-    dt, duration : float
-        Sample time and run length (s), as for :func:`simulate`.
-    controller : TrackingController
-        Continuous or discrete form (its ``u_limits``, ``estimate_limits`` and
-        integral action apply); ``hysteresis_jump`` is not batched.
-    observer : {"phso", "eso", "phdo"}
-    gains : array_like, shape (3,) (shape (4,) for "phdo"; its ``xhat`` metrics are of
-        the lumped ``x3 + d``, which starts from ``xhat0[2]`` with ``d = 0``)
-        Continuous observer gains.
+    duration : float
+        Run length (s), as for :func:`simulate`.
     noise_std : float or array_like, shape (N,)
         Sensor noise std per scenario (length unit).
     seeds : int or array_like of int, shape (N,)
         Noise seed per scenario (``numpy.random.default_rng``).
-    delay, compensate_delay, x0, xhat0, u_prev, window, divergence_limit, allow_unbounded
-        As for :func:`simulate`.
+    window : (float, float), optional
+        Metrics window (s), as for :func:`simulate`.
 
     Returns
     -------
     BatchResult
     """
-    if not isinstance(params, BoucWenParams):
-        raise InputError(f"params must be a BoucWenParams, got {type(params).__name__}")
-    if not isinstance(reference, Reference):
+    if not isinstance(true_params, list | tuple):
+        true_params = list(true_params) if true_params is not None else None
+    run = prepare(loop, reference, duration=duration, true_params=true_params or [])
+    loop = run.loop
+    if loop.observer.kind not in BATCH_OBSERVERS:
         raise InputError(
-            "reference must be a bwdesign Reference (Sine, Triangle, Step or a subclass), "
-            f"got {reference!r}"
+            f"batched observers are {', '.join(BATCH_OBSERVERS)}, got {loop.observer.kind!r}"
         )
-    if observer not in BATCH_OBSERVERS:
-        raise InputError(f"batched observers are {', '.join(BATCH_OBSERVERS)}, got {observer!r}")
-    if not isinstance(controller, TrackingController):
-        raise InputError("controller must be a TrackingController")
-    if controller.hysteresis_jump:
+    if loop.controller.hysteresis_jump:
         raise InputError("hysteresis_jump is not batched; use bwdesign.simulate")
-    true_params = list(true_params)
-    N = len(true_params)
-    if N == 0:
-        raise InputError("true_params holds no scenario")
-    require_bounded(params, allow_unbounded)
-    for i, tp in enumerate(true_params):
-        if not isinstance(tp, BoucWenParams):
-            raise InputError(f"true_params[{i}] must be a BoucWenParams")
-        require_bounded(tp, allow_unbounded)
-    dt = _check_dt(dt)
-    below_nyquist(reference, dt)
-    duration = _finite_nonneg(duration, "duration (s)")
-    n = int(round(duration / dt))
-    if n < 2:
-        raise InputError(f"duration {duration:g} s holds fewer than 2 samples of dt = {dt:g} s")
-    if getattr(controller, "dt", dt) != dt:
-        raise InputError(f"the discrete controller was built for dt = {controller.dt:g} s")
-    four = observer == "phdo"
-    gains = check_disturbance_gains(params, gains) if four else check_gains(params, gains)
+    N = len(run.true_params)
     noise_std = _per_scenario(noise_std, N, "noise_std")
     seeds = np.broadcast_to(np.asarray(seeds), (N,))
     if seeds.dtype.kind not in "iu" or np.any(seeds < 0):
         raise InputError("seeds must be integers >= 0")
-    x0 = _state(x0, "x0")
-    xhat0 = _state(xhat0, "xhat0")
-    u_prev = float(u_prev)
-    if not math.isfinite(u_prev):
-        raise InputError(f"u_prev must be finite, got {u_prev}")
-    limit = float(divergence_limit)
-    if not limit > 0:
-        raise InputError("divergence_limit must be > 0")
-
-    t = np.arange(n) * dt
-    if window is None:
-        win = steady_state_window(t, reference.period)
-    else:
-        win = tuple(float(v) for v in window)
+    t = run.t
+    win = resolve_window(t, reference, window)
     in_win = (t >= win[0] - 1e-12) & (t <= win[1] + 1e-12)
     if not np.any(in_win):
         raise InputError(f"window {win} holds no sample")
-    xd_all, vd_all, ad_all = (
-        np.asarray(a, dtype=float) for a in reference.evaluate(np.arange(n + 1) * dt)
+    acc = _run_batch(run, in_win, noise_std, seeds)
+    stable = acc["alive"].copy()
+    count = acc["count"]
+    settings = {
+        "plant": loop.model.name,
+        "reference": reference.to_dict(),
+        "observer": loop.observer.kind,
+        "gains": list(loop.observer.gains),
+        "controller": loop.controller.to_dict(),
+        "dt": loop.dt,
+        "duration": run.n * loop.dt,
+        "delay": loop.delay,
+        "compensate_delay": loop.compensate_delay,
+        "x0": list(run.start.x0),
+        "xhat0": list(run.start.xhat0),
+        "u_prev": run.start.u_prev,
+    }
+    return BatchResult(
+        stable=stable,
+        status=tuple(acc["status"]),
+        maxe=np.where(stable, acc["max_abs"], np.nan),
+        me=np.where(stable, acc["sum_abs"] / count, np.nan),
+        rmse=np.where(stable, np.sqrt(acc["sum_sq"] / count), np.nan),
+        estimation_rmse=np.where(
+            stable[:, None], np.sqrt(np.stack(acc["est_sq"], axis=1) / count), np.nan
+        ),
+        estimation_maxe=np.where(stable[:, None], np.stack(acc["est_max"], axis=1), np.nan),
+        input_rate_max=np.where(stable, acc["du_max"] / loop.dt, np.nan),
+        window=(float(win[0]), float(win[1])),
+        samples=run.n,
+        settings=settings,
     )
-    Kx, Kr = controller.linear_gains()
-    ff = (Kr[0] * xd_all + Kr[1] * vd_all + Kr[2] * ad_all).tolist()
-    xd_l = xd_all.tolist()
-    kx1, kx2, kx3 = (float(v) for v in Kx)
-    integral = controller.integral_rate is not None
-    ki, cdt = float(controller.ki), float(getattr(controller, "dt", dt))
-    ulo, uhi = controller.u_limits if controller.u_limits else (-math.inf, math.inf)
-    clip = controller.estimate_limits
-    T = _true_matrices(true_params, dt)
-    zm = discretize(params, dt)
-    (m11, m12, m13), (m21, m22, m23) = (float(v) for v in zm.F[0]), (float(v) for v in zm.F[1])
-    mg1, mg2 = float(zm.g[0]), float(zm.g[1])
-    if four:
-        K1, K2, K3, K4 = (float(v) for v in disturbance_discrete_gains(params, gains, dt))
-    else:
-        K1, K2, K3 = (float(v) for v in discrete_gains(params, gains, dt))
-        K4 = 0.0
-    phso = observer in ("phso", "phdo")
-    ma, mb, mc = params.alpha, params.beta, params.gamma
-    H = hysteresis_increment_batch
 
-    x1, x2, x3 = (np.full(N, float(v)) for v in x0)
-    h1, h2, h3 = (np.full(N, float(v)) for v in xhat0)
-    hd = np.zeros(N)  # the PHDO's disturbance estimate (starts at 0)
-    up = np.full(N, u_prev)
-    ua = np.full(N, u_prev)
-    q = np.zeros(N)
+
+def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds: np.ndarray) -> dict:
+    """The loop for every scenario at once: :mod:`bwdesign.sim.kernel`'s step on arrays."""
+    loop, n, N = run.loop, run.n, len(run.true_params)
+    dt, limit = loop.dt, loop.divergence_limit
+    ref = run.reference_terms()
+    xd_l = ref[0].tolist()
+    c = LoopConstants(loop, discrete_observer_gains(loop), ref, ARRAY)
+    T = _true_matrices(list(run.true_params), dt)
+    c.set_plants(T)
+    start = run.start
+    s = LoopState(
+        [np.full(N, float(v)) for v in start.x0],
+        [np.full(N, float(v)) for v in start.xhat0],
+        np.zeros(N),  # the PHDO's disturbance estimate (starts at 0)
+        np.full(N, start.u_prev),
+        np.zeros(N),
+    )
     alive = np.ones(N, dtype=bool)
     status = ["ok"] * N
     vlim = limit * T["w0"]
-    gens = [np.random.default_rng(int(s)) for s in seeds]
+    gens = [np.random.default_rng(int(seed)) for seed in seeds]
     noisy = noise_std > 0
-    sum_abs = np.zeros(N)
-    sum_sq = np.zeros(N)
-    max_abs = np.zeros(N)
-    est_sq = [np.zeros(N), np.zeros(N), np.zeros(N)]  # one contiguous array per state
-    est_max = [np.zeros(N), np.zeros(N), np.zeros(N)]
-    du_max = np.zeros(N)
-    count = 0
-
-    def law(a, b, c, i):
-        nonlocal q
-        if clip:
-            (c1l, c1h), (c2l, c2h), (c3l, c3h) = clip
-            a = np.minimum(np.maximum(a, c1l), c1h)
-            b = np.minimum(np.maximum(b, c2l), c2h)
-            c = np.minimum(np.maximum(c, c3l), c3h)
-        f = ff[i] + ki * q
-        v = f + kx1 * a + kx2 * b + kx3 * c
-        if integral:
-            q = q + cdt * (a - xd_l[i])
-        return np.minimum(np.maximum(v, ulo), uhi)
-
+    acc = {
+        "sum_abs": np.zeros(N),
+        "sum_sq": np.zeros(N),
+        "max_abs": np.zeros(N),
+        "est_sq": [np.zeros(N), np.zeros(N), np.zeros(N)],  # one contiguous array per state
+        "est_max": [np.zeros(N), np.zeros(N), np.zeros(N)],
+        "du_max": np.zeros(N),
+        "count": 0,
+    }
     with np.errstate(all="ignore"):
         for k in range(n):
             j = k % _NOISE_BLOCK
@@ -352,103 +275,43 @@ def simulate_batch(
                 noise = np.zeros((N, block))
                 for i in np.flatnonzero(noisy):
                     noise[i] = noise_std[i] * gens[i].standard_normal(block)
-            zk = x1 + noise[:, j]
-            r = zk - h1
-            h1 = h1 + K1 * r
-            h2 = h2 + K2 * r
-            h3 = h3 + K3 * r
-            if four:
-                hd = hd + K4 * r
-                hw = h3 + hd
-            else:
-                hw = h3
+            correct(c, s, s.x1 + noise[:, j])
             if in_win[k]:
-                e = x1 - xd_l[k]
-                a = np.abs(e)
-                sum_abs += a
-                sum_sq += e * e
-                np.maximum(max_abs, a, out=max_abs)  # NaN propagates: unstable, masked below
-                for acc, mx, hh_, xx_ in zip(
-                    est_sq, est_max, (h1, h2, hw), (x1, x2, x3), strict=True
-                ):
-                    d = hh_ - xx_
-                    acc += d * d
-                    np.maximum(mx, np.abs(d), out=mx)
-                count += 1
-            if not delay:
-                applied = law(h1, h2, hw, k)
-            else:
-                applied = ua
-                if not compensate_delay:
-                    u_next = law(h1, h2, hw, k)
-            hh = H(T["alpha"], T["beta"], T["gamma"], x3, up, applied)
-            x1, x2, x3 = (
-                T["p11"] * x1 + T["p12"] * x2 + T["p13"] * hh + T["g1"] * applied,
-                T["p21"] * x1 + T["p22"] * x2 + T["p23"] * hh + T["g2"] * applied,
-                hh,
-            )
-            g3 = H(ma, mb, mc, h3, up, applied) if phso else h3
-            gw = g3 + hd if four else g3
-            h1, h2, h3 = (
-                m11 * h1 + m12 * h2 + m13 * gw + mg1 * applied,
-                m21 * h1 + m22 * h2 + m23 * gw + mg2 * applied,
-                g3,
-            )
-            hw = h3 + hd if four else h3
-            if delay:
-                if compensate_delay:
-                    u_next = law(h1, h2, hw, k + 1)
-                ua = u_next
+                _accumulate(acc, s, xd_l[k])
+            applied, up = advance(c, s, k)
             if in_win[k]:
-                np.maximum(du_max, np.abs(applied - up), out=du_max)
-            up = applied
+                np.maximum(acc["du_max"], np.abs(applied - up), out=acc["du_max"])
             ok = (
-                (np.abs(x1) <= limit)
-                & (np.abs(x3) <= limit)
-                & (np.abs(h1) <= limit)
-                & (np.abs(hw) <= limit)
-                & (np.abs(x2) <= vlim)
-                & (np.abs(h2) <= vlim)
-                & (np.abs(ua) < 1e300)
+                (np.abs(s.x1) <= limit)
+                & (np.abs(s.x3) <= limit)
+                & (np.abs(s.h1) <= limit)
+                & (np.abs(s.hw) <= limit)
+                & (np.abs(s.x2) <= vlim)
+                & (np.abs(s.h2) <= vlim)
+                & (np.abs(s.ua) < 1e300)
             )
             for i in np.flatnonzero(alive & ~ok):
-                why = (
-                    _diverged(limit, T["w0"][i], x1[i], x2[i], x3[i], h1[i], h2[i], hw[i], ua[i])
-                    or "non-finite state"
-                )
+                why = diverged(
+                    limit, T["w0"][i], s.x1[i], s.x2[i], s.x3[i], s.h1[i], s.h2[i], s.hw[i],
+                    s.ua[i],
+                ) or "non-finite state"  # fmt: skip
                 status[i] = f"diverged at t = {(k + 1) * dt:.6g} s: {why}"
                 alive[i] = False
-    stable = alive.copy()
-    me = np.where(stable, sum_abs / count, np.nan)
-    rmse = np.where(stable, np.sqrt(sum_sq / count), np.nan)
-    maxe = np.where(stable, max_abs, np.nan)
-    est = np.where(stable[:, None], np.sqrt(np.stack(est_sq, axis=1) / count), np.nan)
-    est_max = np.where(stable[:, None], np.stack(est_max, axis=1), np.nan)
-    rate = np.where(stable, du_max / dt, np.nan)
-    settings = {
-        "plant": params.name,
-        "reference": reference.to_dict(),
-        "observer": observer,
-        "gains": gains.tolist(),
-        "controller": controller.to_dict(),
-        "dt": dt,
-        "duration": n * dt,
-        "delay": bool(delay),
-        "compensate_delay": bool(compensate_delay),
-        "x0": x0.tolist(),
-        "xhat0": xhat0.tolist(),
-        "u_prev": u_prev,
-    }
-    return BatchResult(
-        stable=stable,
-        status=tuple(status),
-        maxe=maxe,
-        me=me,
-        rmse=rmse,
-        estimation_rmse=est,
-        estimation_maxe=est_max,
-        input_rate_max=rate,
-        window=(float(win[0]), float(win[1])),
-        samples=n,
-        settings=settings,
-    )
+    acc["alive"], acc["status"] = alive, status
+    return acc
+
+
+def _accumulate(acc: dict, s: LoopState, xd: float) -> None:
+    """One in-window sample of the tracking and estimation statistics."""
+    e = s.x1 - xd
+    a = np.abs(e)
+    acc["sum_abs"] += a
+    acc["sum_sq"] += e * e
+    np.maximum(acc["max_abs"], a, out=acc["max_abs"])  # NaN propagates: unstable, masked
+    for sq, mx, hh, xx in zip(
+        acc["est_sq"], acc["est_max"], (s.h1, s.h2, s.hw), (s.x1, s.x2, s.x3), strict=True
+    ):
+        d = hh - xx
+        sq += d * d
+        np.maximum(mx, np.abs(d), out=mx)
+    acc["count"] += 1

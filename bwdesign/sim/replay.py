@@ -28,7 +28,6 @@ from ..errors import InputError
 from ..model.params import MODEL_FIELDS
 from .closed_loop import simulate
 from .result import SimulationResult
-from .start import start_on_reference
 from .sweep import SweepSpec
 
 __all__ = ["RowReplay", "replay_row", "SENSITIVITY_STEP", "SENSITIVE_RTOL"]
@@ -129,22 +128,16 @@ def replay_row(
         raise InputError(f"the table holds no row for scenario {scenario}, observer {observer!r}")
     i = int(hit[0])
     tp = replace(spec.params, **{k: float(table[k][i]) for k in MODEL_FIELDS})
-    start = start_on_reference(spec.params, spec.reference) if spec.start == "reference" else {}
+    loop = spec.loop_for(observer)
 
     def run(true_params):
         return simulate(
-            spec.params,
+            loop,
             spec.reference,
-            dt=spec.dt,
             duration=spec.duration,
-            observer=observer,
-            gains=spec.gains_for(observer),
-            controller=spec.controller,
             true_params=true_params,
             noise_std=spec.noise_std,
             seed=int(table["noise_seed"][i]),
-            delay=spec.delay,
-            **start,
         )
 
     replayed = run(tp)

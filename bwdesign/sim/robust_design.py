@@ -46,6 +46,7 @@ import numpy as np
 
 from ..certify.robust import RobustCertificate, certify_robust
 from ..control.controllers import make_controller
+from ..control.loop import ON_REFERENCE, ClosedLoop
 from ..control.tuning import DigitalTuning, digital_tuning
 from ..errors import InputError
 from ..model.params import BoucWenParams
@@ -53,9 +54,9 @@ from ..model.plant import check_sample_time
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_gains, gains_for_observer
+from ..observers.spec import ObserverSpec
 from ..validate import below_nyquist
 from .batch import BatchResult, simulate_batch
-from .start import start_on_reference
 
 __all__ = [
     "RobustDesign",
@@ -178,48 +179,25 @@ def _shortlist(tuning: DigitalTuning, n: int) -> list[dict[str, Any]]:
     return out[:n]
 
 
-def simulate_corners(
-    params: BoucWenParams,
-    box: UncertaintyBox,
-    reference: Reference,
-    *,
-    dt: float,
-    gains: Any,
-    lambda1: float,
-    lambda2: float,
-    integral_rate: float | None,
-    delay: bool,
-    observer: str = "phso",
-) -> BatchResult:
-    """The sampled loop simulated at every corner of ``box``, started on the reference.
+def simulate_corners(loop: ClosedLoop, box: UncertaintyBox, reference: Reference) -> BatchResult:
+    """``loop`` simulated at every corner of ``box`` (its start: usually on the reference).
 
-    Three reference periods (0.5 s at least), or for a reference that settles (a
-    step) until 1 s after it has settled, so that every move of the reference is
-    simulated, as the certificate covers every one; statistics over the batch's
-    steady window; ``input_rate_max`` (over the whole run) is what
-    :func:`certified_envelope` compares with the envelope a robust certificate assumes.
+    Three reference periods (0.5 s at least), statistics over the last two; or, for a
+    reference that settles (a step), until 1 s after it has settled with the statistics
+    from its first move on, so that every move of the reference is simulated and
+    measured, as the certificate covers every one. ``input_rate_max`` (over the same
+    window) is what :func:`certified_envelope` compares with the envelope a robust
+    certificate assumes.
     """
-    ctrl = make_controller(
-        params, lambda1, lambda2, form="discrete", dt=dt, integral_rate=integral_rate
-    )
-    start = start_on_reference(params, reference)
     if reference.period is not None:
-        duration = max(3 * reference.period, 0.5)
+        duration, window = max(3 * reference.period, 0.5), None
     else:
-        duration = max((reference.settles_at or 0.0) + 1.0, 1.0)
+        settles = max(reference.settles_at or 0.0, 0.0)
+        duration = max(settles + 1.0, 1.0)
+        moves = [float(b) for b in reference.breakpoints(0.0, settles)]
+        window = (min(moves, default=0.0), duration) if settles > 0 else None
     return simulate_batch(
-        params,
-        reference,
-        box.vertices(params),
-        dt=dt,
-        duration=duration,
-        controller=ctrl,
-        observer=observer,
-        gains=gains,
-        delay=delay,
-        x0=start["x0"],
-        xhat0=start["xhat0"],
-        u_prev=start["u_prev"],
+        loop, reference, box.vertices(loop.model), duration=duration, window=window
     )
 
 
@@ -232,18 +210,15 @@ def certified_envelope(udot_max: float, simulated_rate: float) -> float:
 
 def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
     """Worst tracking error and input rate simulated at the box's corners."""
-    res = simulate_corners(
-        params,
-        box,
-        reference,
-        dt=dt,
-        gains=c["gains"],
-        lambda1=c["lambda"],
-        lambda2=c["lambda"],
+    ctrl = make_controller(
+        params, c["lambda"], c["lambda"], form="discrete", dt=dt,
         integral_rate=c["integral_rate"],
-        delay=delay,
-        observer=observer,
-    )
+    )  # fmt: skip
+    loop = ClosedLoop(
+        params, ObserverSpec.of(observer, c["gains"]), ctrl, dt=dt, delay=delay,
+        start=ON_REFERENCE,
+    )  # fmt: skip
+    res = simulate_corners(loop, box, reference)
     if not res.stable.all():
         return {"simulated_maxe": None, "simulated_udot_max": None}
     return {

@@ -36,15 +36,15 @@ from typing import Any
 import numpy as np
 
 from .. import interrupts
-from ..control.controllers import TrackingController
+from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..errors import BWDesignError, InputError, UnboundedModelError
 from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from ..observers.gains import gains_for_observer
+from ..observers.spec import ObserverSpec
 from ..validate import UDOT_MAX, Range, integer, real
 from .batch import BATCH_OBSERVERS, simulate_batch
-from .start import start_on_reference
 
 __all__ = [
     "SweepSpec",
@@ -101,27 +101,22 @@ class SweepError(BWDesignError, RuntimeError):
 
 @dataclass(frozen=True)
 class SweepSpec:
-    """What every scenario shares: the model, the loop and the run (picklable for Dask).
+    """What every scenario shares: the loop and the run (picklable for Dask).
 
     Attributes
     ----------
-    params : BoucWenParams
-        The model of the observer and the controller.
+    loop : ClosedLoop
+        The model, the law (with its limits), dt, the delay and the start; its observer
+        is replaced per run by each of ``observers`` on ``gains``.
     reference : Reference
-    dt, duration : float
-        Sample time and run length (s).
-    controller : TrackingController
+    duration : float
+        Run length (s).
     gains : tuple of 3 floats
-        Continuous observer gains (the PHDO runs ``(l1, l2, 0, l3)`` of them).
+        The observer design (the PHDO runs ``(l1, l2, 0, l3)`` of it).
     observers : tuple of str
-        Observers run on every scenario (``"phso"``, ``"eso"``).
+        Observers run on every scenario (``"phso"``, ``"eso"``, ``"phdo"``).
     noise_std : float
         Sensor noise std (length unit).
-    delay : bool
-        One-sample computation delay.
-    start : {"reference", "rest"}
-        Every scenario starts on the reference (:func:`bwdesign.start_on_reference`,
-        as the report's runs) or from rest.
     udot_max : float, optional
         The input-rate envelope |u'| <= udot_max (input unit/s) the loop's certificate
         assumed; each row then says whether its input stayed inside
@@ -130,26 +125,48 @@ class SweepSpec:
         Where ``udot_max`` comes from, for reports.
     """
 
-    params: BoucWenParams
+    loop: ClosedLoop
     reference: Reference
-    dt: float
     duration: float
-    controller: TrackingController
     gains: tuple[float, float, float]
     observers: tuple[str, ...] = ("phso",)
     noise_std: float = 0.0
-    delay: bool = False
-    start: str = "reference"
     udot_max: float | None = None
     envelope_source: str = ""
+
+    def loop_for(self, observer: str) -> ClosedLoop:
+        """The loop with ``observer`` on the design gains (the PHDO on ``(l1, l2, 0, l3)``)."""
+        return self.loop.replace(observer=ObserverSpec.of(observer, self.gains))
 
     def gains_for(self, observer: str) -> tuple[float, ...]:
         """The continuous gains ``observer`` runs: ``gains``; ``(l1, l2, 0, l3)`` for the PHDO."""
         return gains_for_observer(observer, self.gains)
 
+    @property
+    def params(self) -> BoucWenParams:
+        """The model of the observer and the controller."""
+        return self.loop.model
+
+    @property
+    def dt(self) -> float:
+        return self.loop.dt
+
+    @property
+    def controller(self) -> Any:
+        return self.loop.controller
+
+    @property
+    def delay(self) -> bool:
+        return self.loop.delay
+
+    @property
+    def start(self) -> str:
+        """``"reference"`` or ``"rest"``."""
+        return "reference" if self.loop.start == ON_REFERENCE else "rest"
+
     def __post_init__(self) -> None:
-        if self.start not in ("reference", "rest"):
-            raise InputError(f"start must be 'reference' or 'rest', got {self.start!r}")
+        if not isinstance(self.loop, ClosedLoop):
+            raise InputError(f"loop must be a ClosedLoop, got {self.loop!r}")
         check_observers(self.observers)
         if self.udot_max is not None:
             real(self.udot_max, "udot_max (input unit/s)", within=UDOT_MAX)
@@ -394,22 +411,15 @@ def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.n
     spec.udot_max``; only when the spec names an envelope) and ``status``.
     """
     tps = _true_params(spec.params, cols)
-    init = start_on_reference(spec.params, spec.reference) if spec.start == "reference" else {}
     out: dict[str, list[np.ndarray]] = {}
     for obs in spec.observers:
         res = simulate_batch(
-            spec.params,
+            spec.loop_for(obs),
             spec.reference,
             tps,
-            dt=spec.dt,
             duration=spec.duration,
-            controller=spec.controller,
-            observer=obs,
-            gains=spec.gains_for(obs),
             noise_std=spec.noise_std,
             seeds=cols["noise_seed"],
-            delay=spec.delay,
-            **init,
         )
         n = len(res)
         part = {k: np.asarray(cols[k]) for k in ("scenario", *MODEL_FIELDS, "noise_seed")}
@@ -598,7 +608,6 @@ def spec_from_config(
     ``[envelope]`` (the one its certificates assume), else the envelope the reference
     itself needs (:func:`bwdesign.derive_envelope`, margin 1).
     """
-    from ..control.controllers import make_controller
     from ..control.tuning import digital_tuning
     from ..errors import ConfigError
 
@@ -614,44 +623,27 @@ def spec_from_config(
             missing.append("[controller] (or the digital tuning)")
     if missing:
         raise ConfigError(f"{config.source or 'config'}: a sweep needs {', '.join(missing)}")
-    params, dt, ctl = config.plant, config.dt, config.controller
-    limits = None
-    if ctl is not None and (ctl.u_min is not None or ctl.u_max is not None):
-        limits = (
-            -math.inf if ctl.u_min is None else ctl.u_min,
-            math.inf if ctl.u_max is None else ctl.u_max,
-        )
-    if tuning == "digital":
-        tune = digital_tuning(params, dt)
-        gains = tuple(tune.gains)
-        controller = make_controller(
-            params,
-            tune.lambda1,
-            tune.lambda2,
-            form="discrete",
-            dt=dt,
-            integral_rate=tune.integral_rate,
-            u_limits=limits,
-        )
-    else:
-        gains = tuple(config.gains)
-        controller = make_controller(
-            params, ctl.lambda1, ctl.lambda2, form=form, dt=dt, u_limits=limits
-        )
+    if start not in ("reference", "rest"):
+        raise InputError(f"start must be 'reference' or 'rest', got {start!r}")
+    law = digital_tuning(config.plant, config.dt) if tuning == "digital" else None
+    gains = tuple(float(g) for g in (law.gains if law is not None else config.gains))
+    loop = ClosedLoop.from_config(
+        config,
+        gains=gains,
+        law=law,
+        form=form,
+        start=ON_REFERENCE if start == "reference" else Start(),
+    ).replace(delay=delay)
     period = config.reference.period
     duration = duration or max(1.0, 3 * period if period else 1.0)
     udot_max, source = _stage_envelope(config)
     return SweepSpec(
-        params=params,
+        loop=loop,
         reference=config.reference,
-        dt=dt,
         duration=duration,
-        controller=controller,
         gains=gains,
         observers=tuple(observers),
         noise_std=noise_std,
-        delay=delay,
-        start=start,
         udot_max=udot_max,
         envelope_source=source,
     )

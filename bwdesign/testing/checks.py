@@ -12,7 +12,6 @@ its metrics over the last two reference periods.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -21,14 +20,13 @@ from typing import Any
 from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
 from ..control.analysis import analyze_loop
-from ..control.controllers import TrackingController, TuningWarning
+from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..errors import ConfigError, InputError
 from ..model.config import StageConfig, load_config
 from ..model.params import MODEL_FIELDS, PRESETS, BoucWenParams, preset
 from ..model.requirements import REQUIREMENT_KEYS
 from ..observers.gains import hurwitz_violations
 from ..sim.batch import simulate_batch
-from ..sim.start import start_on_reference
 
 __all__ = [
     "Check",
@@ -206,19 +204,6 @@ def check_synthesis(
     )
 
 
-def _controller(config: StageConfig) -> TrackingController:
-    ctl = config.controller
-    limits = None
-    if ctl.u_min is not None or ctl.u_max is not None:
-        limits = (
-            -math.inf if ctl.u_min is None else ctl.u_min,
-            math.inf if ctl.u_max is None else ctl.u_max,
-        )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", TuningWarning)
-        return TrackingController(config.plant, ctl.lambda1, ctl.lambda2, u_limits=limits)
-
-
 def _true_plants(config: StageConfig, mismatch: Mapping[str, float] | None) -> list[BoucWenParams]:
     p = config.plant
     if mismatch is not None:
@@ -246,7 +231,7 @@ def check_tracking(
     """Simulated tracking of ``[reference]`` against ME / MAXE limits (um).
 
     ``start="reference"`` starts the loop on the reference as the report's runs do
-    (:func:`bwdesign.start_on_reference`); ``"rest"`` from zero state and input.
+    (``ClosedLoop(start="reference")``); ``"rest"`` from zero state and input.
 
     The worst case over the nominal plant and, without ``mismatch``, every corner
     of the ``[uncertainty]`` box (when the stage has one); with ``mismatch``
@@ -271,19 +256,11 @@ def check_tracking(
     plants = _true_plants(config, mismatch)
     if start not in ("reference", "rest"):
         raise InputError(f"start must be 'reference' or 'rest', got {start!r}")
-    init = start_on_reference(config.plant, config.reference) if start == "reference" else {}
+    loop = ClosedLoop.from_config(
+        config, observer=observer, start=ON_REFERENCE if start == "reference" else Start()
+    )
     res = simulate_batch(
-        config.plant,
-        config.reference,
-        plants,
-        dt=config.dt,
-        duration=duration,
-        controller=_controller(config),
-        observer=observer,
-        gains=config.gains,
-        noise_std=noise_std,
-        seeds=1,
-        **init,
+        loop, config.reference, plants, duration=duration, noise_std=noise_std, seeds=1
     )
     if mismatch is not None:
         where = "plant " + ", ".join(f"{k} {100 * float(v):+g} %" for k, v in mismatch.items())

@@ -1,0 +1,201 @@
+"""What every simulation of a :class:`~bwdesign.control.loop.ClosedLoop` checks and shares.
+
+:func:`prepare` validates a run once for the scalar, the batched and the continuous
+simulation: the reference (a :class:`~bwdesign.model.references.Reference`, below the
+Nyquist frequency of a sampled loop), the duration, the true plants (bounded unless
+the loop allows otherwise, a sample time that suits each), the start and the metrics
+window. :func:`finish` turns a record into a
+:class:`~bwdesign.sim.result.SimulationResult`; :func:`diverged` names what left the
+divergence limits.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..control.loop import ClosedLoop, Start
+from ..errors import InputError
+from ..model.params import BoucWenParams, require_bounded
+from ..model.plant import check_sample_time
+from ..model.references import Reference
+from ..validate import Range, below_nyquist, real
+from .metrics import steady_state_window, tracking_metrics
+from .result import SimulationResult
+
+__all__ = ["Run", "prepare", "finish", "diverged", "resolve_window", "DURATION"]
+
+#: Supported run lengths (s).
+DURATION = Range(0.0, 1e7, lo_open=True, unit="s")
+
+
+@dataclass(frozen=True)
+class Run:
+    """A validated run: the loop, what it tracks, how long, against which plants.
+
+    Attributes
+    ----------
+    loop : ClosedLoop
+    reference : Reference
+    duration : float
+        Requested length (s).
+    n : int
+        Samples (sampled loops; 0 for a continuous run).
+    start : Start
+        The resolved start.
+    true_params : tuple of BoucWenParams
+        The simulated plant(s).
+    """
+
+    loop: ClosedLoop
+    reference: Reference
+    duration: float
+    n: int
+    start: Start
+    true_params: tuple[BoucWenParams, ...]
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times (s)."""
+        return np.arange(self.n) * self.loop.dt
+
+    def reference_terms(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x_d, x_d', x_d'')`` at the ``n + 1`` sample instants (one beyond the run)."""
+        t = np.arange(self.n + 1) * self.loop.dt
+        return tuple(np.asarray(a, dtype=float) for a in self.reference.evaluate(t))
+
+
+def prepare(
+    loop: ClosedLoop,
+    reference: Reference,
+    *,
+    duration: float,
+    true_params: Any = None,
+    sampled: bool = True,
+) -> Run:
+    """Check a run of ``loop`` (see the module docstring); ``true_params``: one plant,
+    a list of plants (a batch) or ``None`` (the model itself).
+
+    Raises
+    ------
+    InputError, UnboundedModelError
+        Anything malformed, before any simulation (a diverging loop never raises).
+    """
+    if not isinstance(loop, ClosedLoop):
+        raise InputError(
+            f"loop must be a ClosedLoop (bwdesign.ClosedLoop(...) or ClosedLoop.from_config), "
+            f"got {type(loop).__name__}"
+        )
+    if not isinstance(reference, Reference):
+        raise InputError(
+            "reference must be a bwdesign Reference (Sine, Triangle, Step or a subclass), "
+            f"got {reference!r}"
+        )
+    duration = real(duration, "duration (s)", within=DURATION)
+    if true_params is None:
+        plants: list[Any] = [loop.model]
+    elif isinstance(true_params, BoucWenParams):
+        plants = [true_params]
+    else:
+        try:
+            plants = list(true_params)
+        except TypeError:
+            raise InputError(
+                f"true_params must be a BoucWenParams or a list of them, got {true_params!r}"
+            ) from None
+        if not plants:
+            raise InputError("true_params holds no scenario")
+    for i, tp in enumerate(plants):
+        if not isinstance(tp, BoucWenParams):
+            where = "true_params" if len(plants) == 1 else f"true_params[{i}]"
+            raise InputError(f"{where} must be a BoucWenParams, got {type(tp).__name__}")
+        require_bounded(tp, loop.allow_unbounded)
+    n = 0
+    if sampled:
+        if loop.dt is None:
+            raise InputError("a sampled simulation needs the loop's dt (ClosedLoop(dt=...))")
+        for tp in plants:
+            check_sample_time(tp, loop.dt)
+        below_nyquist(reference, loop.dt)
+        n = int(round(duration / loop.dt))
+        if n < 2:
+            raise InputError(
+                f"duration {duration:g} s holds fewer than 2 samples of dt = {loop.dt:g} s"
+            )
+    return Run(
+        loop=loop,
+        reference=reference,
+        duration=duration,
+        n=n,
+        start=loop.initial(reference),
+        true_params=tuple(plants),
+    )
+
+
+def resolve_window(t: np.ndarray, reference: Reference, window: Any) -> tuple[float, float]:
+    """The metrics window: ``window`` as given, or the default steady-state window."""
+    if window is None:
+        return steady_state_window(t, reference.period)
+    try:
+        w0, w1 = (float(v) for v in window)
+    except (TypeError, ValueError):
+        raise InputError(f"window must be (t_start, t_end) in s, got {window!r}") from None
+    return (w0, w1)
+
+
+def finish(
+    run: Run,
+    record: dict[str, Any],
+    *,
+    window: Any,
+    mode: str,
+    settings: dict[str, Any],
+) -> SimulationResult:
+    """The :class:`SimulationResult` of a record (``t, x, xhat, u, x_d, z, stable,
+    status``), with its metrics over the window when the run stayed stable."""
+    t, x, xhat = record["t"], record["x"], record["xhat"]
+    xd = record["x_d"]
+    stable, status = record["stable"], record["status"]
+    e = x[:, 0] - xd
+    metrics = None
+    est = None
+    win = resolve_window(t, run.reference, window) if t.size else (math.nan, math.nan)
+    if stable and t.size:
+        try:
+            metrics = tracking_metrics(e, t, win)
+            sel = (t >= win[0] - 1e-12) & (t <= win[1] + 1e-12)
+            d = xhat[sel] - x[sel]
+            est = tuple(float(v) for v in np.sqrt(np.mean(d * d, axis=0)))
+        except InputError as err:
+            stable, status = False, f"no metrics: {err}"
+    return SimulationResult(
+        t=t,
+        x=x,
+        xhat=xhat,
+        u=record["u"],
+        x_d=xd,
+        e=e,
+        z=record["z"],
+        metrics=metrics,
+        window=win,
+        estimation_rmse=est,
+        stable=stable,
+        status=status,
+        mode=mode,
+        settings=settings,
+    )
+
+
+def diverged(limit, w0, x1, x2, x3, xh1, xh2, xh3, u) -> str | None:
+    """What left the divergence limits (``None`` when nothing did)."""
+    vals = (x1, x2, x3, xh1, xh2, xh3, u)
+    if not all(math.isfinite(v) for v in vals):
+        return "non-finite state"
+    if max(abs(x1), abs(x3), abs(xh1), abs(xh3)) > limit:
+        return f"displacement or hysteresis state beyond {limit:g}"
+    if max(abs(x2), abs(xh2)) > limit * w0:
+        return f"velocity beyond {limit * w0:g}"
+    return None
