@@ -29,7 +29,7 @@ from .args import (
     nonneg_float,
     positive_float,
 )
-from .stage import Stage, load_stage
+from .stage import Stage, load_stage, resolved_copy
 
 __all__ = ["certify_args", "run_certify", "synthesize_args", "run_synthesize"]
 
@@ -249,9 +249,9 @@ def _robust_request(args: argparse.Namespace, stage: Stage) -> dict:
             "give --dt or a [sampling] dt in the file"
         )
     ctrl = None if cfg is None else cfg.controller
-    limits = None
-    if ctrl is not None and ctrl.u_min is not None and ctrl.u_max is not None:
-        limits = (ctrl.u_min, ctrl.u_max)
+    limits = None if ctrl is None else ctrl.input_limits()
+    if limits is not None and not all(math.isfinite(v) for v in limits):
+        limits = None  # a one-sided limit does not bound the input
     args.input_range = stage.default(args, "input_range", "[controller]", limits)
     if args.input_range is None and cfg is not None and cfg.reference is not None:
         from ..model.envelope import given_envelope
@@ -294,6 +294,7 @@ def _print_robust(rep: CertificateReport) -> None:
 def run_certify(args: argparse.Namespace) -> int:
     """Run ``bwdesign certify``; exit 0 when a tier holds (and the robust certificate, when
     the file has an [uncertainty] section), 1 otherwise."""
+    args = resolved_copy(args)
     stage = load_stage(args.plant)
     params = stage.params
     if stage.config is not None:
@@ -372,6 +373,7 @@ def _print_synthesis(res: SynthesisResult) -> None:
 
 def run_synthesize(args: argparse.Namespace) -> int:
     """Run ``bwdesign synthesize``; exit 0 with gains, 1 when infeasible."""
+    args = resolved_copy(args)
     if args.robust:
         given = [
             f"--{k.replace('_', '-')}"

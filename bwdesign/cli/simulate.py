@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import math
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -31,6 +32,7 @@ from ..control.controllers import TuningWarning, make_controller
 from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..control.tuning import digital_tuning
 from ..model.config import load_plant
+from ..model.params import BoucWenParams
 from ..model.references import Reference, Sine, Step, Triangle
 from ..observers.spec import ObserverSpec
 from ..output.files import FileTarget, prepare_file
@@ -47,9 +49,9 @@ from .args import (
     nonneg_float,
     positive_float,
 )
-from .stage import Stage, load_stage
+from .stage import Stage, load_stage, resolved_copy
 
-__all__ = ["simulate_args", "run_simulate"]
+__all__ = ["simulate_args", "run_simulate", "simulate_request", "SimulateRequest"]
 
 MAX_SAMPLES = 20_000_000
 
@@ -256,8 +258,36 @@ def _write_csv(result: SimulationResult, target: FileTarget) -> None:
         np.savetxt(f, cols, delimiter=",", header=header, comments="", fmt="%.10g")
 
 
-def run_simulate(args: argparse.Namespace) -> int:
-    """Run ``bwdesign simulate``; returns the exit code."""
+@dataclass(frozen=True)
+class SimulateRequest:
+    """What ``bwdesign simulate`` runs: resolved once from the command line and the file.
+
+    The argparse namespace is read, never changed: the options a ``--plant FILE.toml``
+    fills in are resolved on a copy.
+    """
+
+    stage: Stage
+    loop: ClosedLoop
+    reference: Reference
+    duration: float
+    true_params: BoucWenParams | None
+    noise_std: float
+    seed: int
+    csv: str | None
+    json: bool
+    tuning: dict | None
+    options: dict  # the resolved options, for the printed summary
+
+
+def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
+    """Validate the options of ``bwdesign simulate`` and resolve the file's defaults.
+
+    Raises
+    ------
+    UsageError, InputError, ConfigError
+        One ``error:`` line on the command line.
+    """
+    args = resolved_copy(namespace)  # resolved here; the caller's is untouched
     stage = load_stage(args.plant)
     params = stage.params
     true_params = load_plant(args.true_plant) if args.true_plant else None
@@ -313,9 +343,6 @@ def run_simulate(args: argparse.Namespace) -> int:
     u_limits = _u_limits(args.u_min, args.u_max)
     if args.integral_rate is not None and args.form != "discrete":
         raise UsageError("--integral-rate needs --form discrete")
-    target = None
-    if args.csv is not None:
-        target = prepare_file(args.csv, command="simulate --csv", what="--csv")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", TuningWarning)
         controller = make_controller(
@@ -332,30 +359,52 @@ def run_simulate(args: argparse.Namespace) -> int:
         start=ON_REFERENCE if args.start_on_reference else Start(),
         allow_unbounded=args.allow_unbounded,
     )
-    result = simulate(
-        loop,
-        reference,
+    return SimulateRequest(
+        stage=stage,
+        loop=loop,
+        reference=reference,
         duration=args.duration,
         true_params=true_params,
         noise_std=args.noise_std,
         seed=args.seed,
+        csv=args.csv,
+        json=bool(args.json),
+        tuning=tuning,
+        options=dict(vars(args)),
+    )
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    """Run ``bwdesign simulate``; returns the exit code."""
+    req = simulate_request(args)
+    target = None
+    if req.csv is not None:
+        target = prepare_file(req.csv, command="simulate --csv", what="--csv")
+    result = simulate(
+        req.loop,
+        req.reference,
+        duration=req.duration,
+        true_params=req.true_params,
+        noise_std=req.noise_std,
+        seed=req.seed,
     )
     if target is not None:
         _write_csv(result, target)
+    params, reference, stage, o = req.loop.model, req.reference, req.stage, req.options
     doc = result.to_dict()
     doc["plant"] = params.to_dict()
     doc["reference"] = reference.to_dict()
-    doc["observer"] = args.observer
-    doc["tuning"] = tuning
+    doc["observer"] = o["observer"]
+    doc["tuning"] = req.tuning
     doc["csv"] = str(target.path) if target else None
-    doc["start"] = "on reference" if args.start_on_reference else "rest"
+    doc["start"] = "on reference" if o["start_on_reference"] else "rest"
     doc["defaults_from_file"] = stage.to_dict()
-    if args.json:
+    if req.json:
         print(dump_json(doc))
     else:
         if stage.note() is not None:
             print(stage.note())
-        _print(result, params, reference.describe(), args)
+        _print(result, params, reference.describe(), argparse.Namespace(**o))
     return EXIT_OK if result.stable else EXIT_NO
 
 

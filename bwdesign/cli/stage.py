@@ -18,7 +18,7 @@ from typing import Any
 from ..model.config import StageConfig, load_config, load_plant
 from ..model.params import PRESETS, BoucWenParams
 
-__all__ = ["Stage", "load_stage"]
+__all__ = ["Stage", "load_stage", "resolved_copy"]
 
 
 @dataclass
@@ -67,3 +67,9 @@ def load_stage(name_or_path: str) -> Stage:
         return Stage(params=load_plant(name_or_path))
     config = load_config(name_or_path)
     return Stage(params=config.plant, config=config)
+
+
+def resolved_copy(args: argparse.Namespace) -> argparse.Namespace:
+    """A copy of a command's options for resolving the file's defaults into: the namespace
+    argparse returned is never changed (a command may be run twice with it)."""
+    return argparse.Namespace(**vars(args))
