@@ -50,7 +50,7 @@ from ..certify.disturbance import LumpedCertificate, certify_disturbance
 from ..certify.results import CertificateReport
 from ..certify.synthesis import synthesize as synthesize_gains
 from ..certify.tiers import certify, certify_discrete
-from ..control.controllers import DiscreteTrackingController
+from ..control.loop import controller_from_config
 from ..control.tuning import digital_tuning
 from ..errors import ConfigError, InputError, NotCertifiedError
 from ..model.config import StageConfig
@@ -214,23 +214,13 @@ def _gains(config, source, dt, udot_max):
     The PHDO entry is None when there are no gains to export (synthesis infeasible).
     """
     params = config.plant
-    ctl = config.controller
     if source == "digital":
         tune = digital_tuning(params, dt)
         gains = tuple(float(g) for g in tune.gains)
-        controller = DiscreteTrackingController(
-            params,
-            tune.lambda1,
-            tune.lambda2,
-            dt=dt,
-            integral_rate=tune.integral_rate,
-            u_limits=_limits(ctl),
-        )
+        controller = controller_from_config(config, law=tune)
         phdo = _phdo_gains(params, source, dt, udot_max, gains, None, tune)
         return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller, phdo
-    controller = DiscreteTrackingController(
-        params, ctl.lambda1, ctl.lambda2, dt=dt, u_limits=_limits(ctl)
-    )
+    controller = controller_from_config(config, form="discrete")
     if source == "synthesize":
         decay = (config.synthesis or {}).get("decay", 100.0)
         syn = synthesize_gains(
@@ -253,11 +243,6 @@ def _gains(config, source, dt, udot_max):
     gains = tuple(config.gains)
     phdo = _phdo_gains(params, source, dt, udot_max, gains, None, None)
     return gains, None, certify(params, gains, udot_max=udot_max, dt=dt), controller, phdo
-
-
-def _limits(ctl) -> tuple[float, float] | None:
-    """The stage's input limits (:meth:`ControllerSettings.input_limits`)."""
-    return None if ctl is None else ctl.input_limits()
 
 
 def _summary(

@@ -32,7 +32,7 @@ from ..observers.spec import ObserverSpec
 from ..validate import SIGNAL, Range, real
 from .controllers import TrackingController, TuningWarning, make_controller
 
-__all__ = ["ClosedLoop", "Start", "ON_REFERENCE", "DIVERGENCE_LIMIT"]
+__all__ = ["ClosedLoop", "Start", "ON_REFERENCE", "DIVERGENCE_LIMIT", "controller_from_config"]
 
 #: ``start=ON_REFERENCE``: begin on the reference (:meth:`Start.on_reference`).
 ON_REFERENCE = "reference"
@@ -224,26 +224,8 @@ class ClosedLoop:
             robust certificate covers).
         allow_unbounded : bool
         """
-        if config.dt is None:
-            raise ConfigError(f"{config.source or 'config'}: the loop needs [sampling] dt")
-        dt = float(config.dt)
-        ctl = config.controller
-        limits = ctl.input_limits() if ctl is not None and saturate else None
-        if law is None:
-            if ctl is None:
-                raise ConfigError(
-                    f"{config.source or 'config'}: the loop needs [controller] lambda1, lambda2"
-                )
-            lambdas, kw = (ctl.lambda1, ctl.lambda2), {"form": form}
-            design, delay = config.gains, False
-        else:
-            lambdas = (float(law.lambda1), float(law.lambda2))
-            rate = None if law.integral_rate is None else float(law.integral_rate)
-            kw = {"form": "discrete", "integral_rate": rate}
-            design, delay = law.gains, bool(law.delay)
-        with warnings.catch_warnings():  # a stage's own constants: the law is as given
-            warnings.simplefilter("ignore", TuningWarning)
-            controller = make_controller(config.plant, *lambdas, dt=dt, u_limits=limits, **kw)
+        controller = controller_from_config(config, law=law, form=form, saturate=saturate)
+        design, delay = (config.gains, False) if law is None else (law.gains, bool(law.delay))
         if gains is not None:
             design = gains
         if observer != "ukf" and design is None:
@@ -256,7 +238,7 @@ class ClosedLoop:
             model=config.plant,
             observer=spec,
             controller=controller,
-            dt=dt,
+            dt=float(config.dt),
             delay=delay,
             start=start,
             allow_unbounded=allow_unbounded,
@@ -291,3 +273,35 @@ class ClosedLoop:
             "start": self.start.to_dict() if isinstance(self.start, Start) else self.start,
             "divergence_limit": self.divergence_limit,
         }
+
+
+def controller_from_config(
+    config: Any, *, law: Any = None, form: str = "continuous", saturate: bool = True
+) -> TrackingController:
+    """A stage's tracking law: the one place it is built from a file.
+
+    ``law=None``: eq. (12) with the ``[controller]`` constants in ``form``; a digital
+    tuning: its discrete law with integral action. The ``[controller]`` input limits
+    apply unless ``saturate=False``; ``dt`` is the ``[sampling]`` dt.
+
+    Raises
+    ------
+    ConfigError
+        No ``[sampling]`` dt, or no ``[controller]`` without ``law``.
+    """
+    where = config.source or "config"
+    if config.dt is None:
+        raise ConfigError(f"{where}: the loop needs [sampling] dt")
+    ctl = config.controller
+    limits = ctl.input_limits() if ctl is not None and saturate else None
+    if law is None:
+        if ctl is None:
+            raise ConfigError(f"{where}: the loop needs [controller] lambda1, lambda2")
+        lambdas, kw = (ctl.lambda1, ctl.lambda2), {"form": form}
+    else:
+        lambdas = (float(law.lambda1), float(law.lambda2))
+        rate = None if law.integral_rate is None else float(law.integral_rate)
+        kw = {"form": "discrete", "integral_rate": rate}
+    with warnings.catch_warnings():  # a stage's own constants: the law is as given
+        warnings.simplefilter("ignore", TuningWarning)
+        return make_controller(config.plant, *lambdas, dt=float(config.dt), u_limits=limits, **kw)
