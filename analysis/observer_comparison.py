@@ -7,7 +7,8 @@ Usage::
 Cases
 -----
 - ``section41``: ``paper_simulation_corrected`` (Section 4's parameters with the
-  sign of beta corrected by bwdesign, see DESIGN.md section 2), true initial
+  sign of beta corrected by bwdesign, see docs/design.md, section
+  "The simulation parameter set"), true initial
   state (10, 2, 2), estimates starting at 0,
   ``u = 3 sin(0.4 pi t - 0.5 pi) + 3`` over one period (5 s), gains
   (40, 40, -80) and (80, 160, -640).

@@ -167,7 +167,7 @@ def test_distributions_are_complete_and_pass_twine(dists):
     assert sorted(n for n in rel if n.endswith(".toml") and n != "pyproject.toml") == [
         f"bwdesign/model/stages/{f}" for f in STAGE_FILES
     ]
-    assert {"LICENSE", "README.md", "pyproject.toml", "PKG-INFO"} <= set(rel)
+    assert {"LICENSE", "README.md", "pyproject.toml", "PKG-INFO", "docs/design.md"} <= set(rel)
     assert not [n for n in rel if n.split("/")[0] in ("configs", "tests", "reports")]
 
 

@@ -118,7 +118,8 @@ def test_unbounded_model_is_refused_unless_allowed():
     with pytest.raises(UnboundedModelError):
         simulate_zoh(p, u, DT, np.zeros(3))
     X = simulate_zoh(p, u, DT, np.array([10.0, 2.0, 2.0]), allow_unbounded=True)
-    # as printed, x3 grows without bound on the rising input (DESIGN.md 2.4)
+    # as printed, x3 grows without bound on the rising input
+    # (docs/design.md, section "The simulation parameter set")
     assert not np.all(np.abs(X[:, 2]) < 1e6)
 
 

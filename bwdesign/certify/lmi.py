@@ -1,6 +1,7 @@
 """Linear matrix inequalities of the certificates, solved with cvxpy.
 
-This is the only module of bwdesign that imports cvxpy (DESIGN.md section 5).
+This is the only module of bwdesign that imports cvxpy (docs/design.md, section
+"Layers and data flow").
 It knows nothing about Bouc-Wen models: every function takes *scaled* numpy
 matrices (entries of order one, prepared by :mod:`bwdesign.certify`), solves
 one small semidefinite program and returns an :class:`LMISolution`.

@@ -1,7 +1,7 @@
 """Certified observer gains: four certificate tiers and LMI gain synthesis.
 
 The observer error ``eps = x_hat - x`` of the hysteresis observer (paper eq. 3)
-obeys (DESIGN.md section 3)::
+obeys (docs/design.md, section "Error dynamics")::
 
     eps' = A eps + e3 phi~,   A = A0 - l C,   C = e1',
     A0 = [[0, 1, 0], [-a1, -a2, -a1], [0, 0, 0]],

@@ -4,7 +4,7 @@ Units: t in s, u in V, y in µm (the package's length unit). Convert before
 loading: a logger in mm gives ``y_um = 1000 y_mm``; one in nm gives
 ``y_um = y_nm / 1000``; a logged amplifier output in kV gives ``u_V = 1000 u_kV``.
 
-Sample convention (DESIGN.md section 4): ``u[k]`` is the command held over
+Sample convention (docs/design.md, section "The sample clock"): ``u[k]`` is the command held over
 ``[t_k, t_k + dt)`` and ``y[k]`` the displacement at the end of that interval.
 A logger that stamps ``y`` at the start of the interval is a one-sample delay,
 which :func:`bwdesign.identify` estimates.

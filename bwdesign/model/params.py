@@ -1,4 +1,4 @@
-"""Bouc-Wen actuator parameters: the model of DESIGN.md section 1.
+"""Bouc-Wen actuator parameters: the model of docs/design.md, section "The model".
 
 The state-space form used everywhere in bwdesign (paper eq. 2)::
 

@@ -1,6 +1,6 @@
 """The Bouc-Wen plant: continuous right-hand side and exact sampled-data model.
 
-Sampled-data model (DESIGN.md section 4). With the input held over each sample
+Sampled-data model (docs/design.md, section "Exact sampling"). With the input held over each sample
 (zero-order hold), the model is discretised *exactly*:
 
 1. At ``t_k`` the held input jumps from ``u_{k-1}`` to ``u_k``. Bouc-Wen is
