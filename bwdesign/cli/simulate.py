@@ -78,6 +78,12 @@ _N_GAINS = {"phso": 3, "eso": 3, "phdo": 4}
 def simulate_args(p: argparse.ArgumentParser) -> None:
     """Arguments of ``bwdesign simulate``."""
     add_plant_args(p)
+    _reference_args(p)
+    _loop_args(p)
+    _run_args(p)
+
+
+def _reference_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--reference",
         choices=("sine", "triangle", "step"),
@@ -119,6 +125,9 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--t-step", type=nonneg_float, default=None, metavar="S", help="step: time of the step (s)"
     )
+
+
+def _loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--observer",
         choices=("phso", "eso", "phdo", "ukf"),
@@ -164,6 +173,9 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
         help="integral action of the discrete form (1/s)",
     )
     p.add_argument("--dt", type=positive_float, default=None, help="sample time (s)")
+
+
+def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=positive_float, required=True, help="run length (s)")
     p.add_argument(
         "--noise-std",
