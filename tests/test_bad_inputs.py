@@ -341,6 +341,24 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         "leaves a1 not determined",
     ),
     (
+        "certify --uncertainty-from an undetermined box",
+        [*CERT_STAGE, "--uncertainty-from", "box.toml", "--input-range", "0,150"],
+        _boxed("alpha = { abs = inf }", "box.toml"),
+        "leaves alpha not determined",
+    ),
+    (
+        "synthesize --robust over a box leaving the class",
+        ["synthesize", *STAGE, "--robust"],
+        _boxed("beta = { rel = 0.95 }"),
+        "leaves the bounded class",
+    ),
+    (
+        "synthesize --robust over an undetermined box",
+        ["synthesize", *STAGE, "--robust"],
+        _boxed("a3 = { abs = inf }"),
+        "leaves a3 not determined",
+    ),
+    (
         "report [sweep] observers twice",
         REPORT,
         _stage(SWEPT + 'observers = ["eso", "eso"]\n'),
