@@ -31,16 +31,21 @@ from pathlib import Path
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from bwdesign import DiscreteTrackingController, Sine, digital_tuning, preset, simulate
+from bwdesign import (
+    DiscreteTrackingController,
+    Sine,
+    UncertaintyBox,
+    digital_tuning,
+    preset,
+    simulate,
+)
 from bwdesign.model.plant import hysteresis_increment, zoh_step
 from bwdesign.sim.batch import simulate_batch
-from bwdesign.sim.sweep import SweepSpec, box_bounds, draw_scenarios, run_sweep
+from bwdesign.sim.sweep import SweepSpec, draw_scenarios, run_sweep
 
 DT = 2e-4
 TARGET = 1e7
-BOX = {k: ("rel", 0.02) for k in ("a1", "a2", "a3")} | {
-    k: ("rel", 0.1) for k in ("alpha", "beta", "gamma")
-}
+BOX = UncertaintyBox.parse("a1=2%,a2=2%,a3=2%,alpha=10%,beta=10%,gamma=10%")
 
 
 def _setup():
@@ -54,8 +59,8 @@ def _setup():
 
 def batched(n: int) -> float:
     p, tune, ctl, ref = _setup()
-    cols = draw_scenarios(p, box_bounds(p, BOX), n, seed=0)
-    tps = [replace(p, **{k: float(cols[k][i]) for k in BOX}) for i in range(n)]
+    cols = draw_scenarios(p, BOX, n, seed=0)
+    tps = [replace(p, **{k: float(cols[k][i]) for k in BOX.widths}) for i in range(n)]
     duration = 1.0
     t0 = time.perf_counter()
     res = simulate_batch(
@@ -113,7 +118,7 @@ def sweep_time(n: int, workers: int) -> float:
         observers=("phso",),
         noise_std=0.02,
     )
-    sc = draw_scenarios(p, box_bounds(p, BOX), n, seed=0)
+    sc = draw_scenarios(p, BOX, n, seed=0)
     t0 = time.perf_counter()
     run_sweep(spec, sc, chunk_size=max(1, n // (2 * workers)), workers=workers)
     return time.perf_counter() - t0

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bwdesign import BoucWenParams, Sine, certify, preset, simulate, synthesize
+from bwdesign import BoucWenParams, Sine, UncertaintyBox, certify, preset, simulate, synthesize
 from bwdesign.cli.main import main
 from bwdesign.control.controllers import TrackingController
 from bwdesign.errors import ConfigError, InputError, ParameterError
@@ -133,6 +133,21 @@ SWEEP = [
     "3",
 ]
 SWEPT = GOOD_TOML + "[uncertainty]\na1 = { rel = 0.02 }\n\n[sweep]\nsamples = 4\n"
+
+
+def sweep_box(text: str) -> list[str]:
+    """``SWEEP`` with ``--uncertainty TEXT``."""
+    return [*SWEEP[:-3], text, *SWEEP[-2:]]
+
+
+def _boxed(box: str, name: str = "stage.toml") -> Callable[[Path], None]:
+    """The good stage with ``[uncertainty]`` ``box`` (as ``name``; stage.toml also written)."""
+
+    def make(tmp: Path) -> None:
+        _good(tmp)
+        (tmp / name).write_text(GOOD_TOML + "[uncertainty]\n" + box + "\n")
+
+    return make
 
 
 def _record(*, u: float | None = None, y: float | None = None, dt: float = 1e-3):
@@ -297,6 +312,52 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         _good,
         "a1 given twice",
     ),  # fmt: skip
+    # -- the uncertainty box (issue 25): one parser, one check ------------------------
+    ("sweep --uncertainty zeta=2%", sweep_box("zeta=2%"), _good, "expected NAME=WIDTH"),
+    ("sweep --uncertainty a1", sweep_box("a1"), _good, "expected NAME=WIDTH"),
+    ("sweep --uncertainty a1=x", sweep_box("a1=x"), _good, "a1 half-width must be a number"),
+    ("sweep --uncertainty a1=-2%", sweep_box("a1=-2%"), _good, "(%) = -2 is outside"),
+    ("sweep --uncertainty a1=inf", sweep_box("a1=inf"), _good, "a1 half-width must be finite"),
+    ("sweep --uncertainty ''", sweep_box(""), _good, "--uncertainty: no parameter given"),
+    ("sweep --uncertainty beta=95%", sweep_box("beta=95%"), _good, "leaves the bounded class"),
+    ("sweep --uncertainty a3=150%", sweep_box("a3=150%"), _good, "a3 must keep its sign"),
+    ("sweep --uncertainty a1=200%", sweep_box("a1=200%"), _good, "lets a1 reach"),
+    (
+        "sweep [uncertainty] a1 inf",
+        [*SWEEP[:5], *SWEEP[-2:]],
+        _boxed("a1 = { rel = inf }"),
+        "leaves a1 not determined",
+    ),  # fmt: skip
+    (
+        "report [sweep] over a box leaving the class",
+        REPORT,
+        _stage(SWEPT.replace("a1 = { rel = 0.02 }", "beta = { rel = 0.95 }")),
+        "leaves the bounded class",
+    ),
+    (
+        "report [sweep] over an undetermined box",
+        REPORT,
+        _stage(SWEPT.replace("a1 = { rel = 0.02 }", "a1 = { rel = inf }")),
+        "leaves a1 not determined",
+    ),
+    (
+        "certify --uncertainty-from an undetermined box",
+        [*CERT_STAGE, "--uncertainty-from", "box.toml", "--input-range", "0,150"],
+        _boxed("alpha = { abs = inf }", "box.toml"),
+        "leaves alpha not determined",
+    ),
+    (
+        "synthesize --robust over a box leaving the class",
+        ["synthesize", *STAGE, "--robust"],
+        _boxed("beta = { rel = 0.95 }"),
+        "leaves the bounded class",
+    ),
+    (
+        "synthesize --robust over an undetermined box",
+        ["synthesize", *STAGE, "--robust"],
+        _boxed("a3 = { abs = inf }"),
+        "leaves a3 not determined",
+    ),
     (
         "report [sweep] observers twice",
         REPORT,
@@ -484,6 +545,19 @@ PYTHON = [
         ),
         InputError,
         r"dt \(s\) = 1e-16 is outside the supported range \[1e-09, 1\] s",
+    ),
+    (
+        "UncertaintyBox.parse a1 twice",
+        lambda: UncertaintyBox.parse("a1=2%,a1=3%"),
+        InputError,
+        "a1 given twice",
+    ),
+    ("UncertaintyBox zeta", lambda: UncertaintyBox({"zeta": ("rel", 0.1)}), InputError, "zeta"),
+    (
+        "UncertaintyBox.check leaving the class",
+        lambda: UncertaintyBox.parse("beta=95%").check(P),
+        ParameterError,
+        "leaves the bounded class",
     ),
     (
         "excite below the smallest rate",

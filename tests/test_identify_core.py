@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from bwdesign import BoucWenParams, IdentificationResult, identify, preset, simulate_zoh
+from bwdesign import (
+    BoucWenParams,
+    IdentificationResult,
+    ParameterError,
+    identify,
+    preset,
+    simulate_zoh,
+)
 from bwdesign.identify.excite import design_excitation, simulate_record
 from bwdesign.identify.problem import params_from_theta
 from bwdesign.identify.simulate import linear_matrices, simulate_output
@@ -91,6 +98,11 @@ def test_quick_round_trip_without_init():
     box = res.to_uncertainty()
     assert box.source == "identified" and box.level == 0.95
     assert box.half_width("a1", res.params) == pytest.approx(res.ci95["a1"][1] - res.params.a1)
+    # the identified box is the one type: its checked bounds are the 95 % intervals
+    checked = box.check(res.params)
+    assert list(checked) == list(NAMES)
+    for n in NAMES:
+        assert checked[n] == pytest.approx(res.ci95[n], rel=1e-12)
 
 
 def test_delay_of_one_sample_is_found():
@@ -126,7 +138,10 @@ def test_slow_sine_bench_record_offset_mid_cycle(fs):
     for n_ in ("alpha", "beta"):
         assert res.determined[n_]
         assert abs(getattr(res.params, n_) / getattr(plant, n_) - 1) < 0.02
-    assert res.to_uncertainty().undetermined() == ("a1", "a2", "a3")
+    box = res.to_uncertainty()
+    assert box.undetermined() == ("a1", "a2", "a3")
+    with pytest.raises(ParameterError, match="leaves a1, a2, a3 not determined"):
+        box.check(res.params)  # what every user of the box (sweep, certificates) says
 
 
 def test_poor_excitation_says_what_is_not_determined():

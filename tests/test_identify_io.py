@@ -1,16 +1,17 @@
-"""Identification input and output: the bad-data table, [uncertainty], the commands."""
+"""Identification input and output: the bad-data table and the commands.
+
+The [uncertainty] box they write is tested in tests/test_uncertainty.py.
+"""
 
 from __future__ import annotations
 
 import json
-import math
 import re
-import tomllib
 
 import numpy as np
 import pytest
 
-from bwdesign import ConfigError, InputError, ParameterError, UncertaintyBox, load_config, preset
+from bwdesign import InputError, load_config, preset
 from bwdesign.cli import main
 from bwdesign.identify import MIN_SAMPLES, load_data
 from bwdesign.identify.excite import (
@@ -98,70 +99,6 @@ def test_columns_mapping_extra_columns_and_npz(tmp_path):
         load_data(tmp_path / "d.npz", columns="t,u,disp")
     with pytest.raises(InputError, match="does not exist"):
         load_data(tmp_path / "nope.csv")
-
-
-# -- [uncertainty] -------------------------------------------------------------
-
-
-def test_uncertainty_box_round_trip_and_geometry():
-    p = preset("paper_experiment")
-    box = UncertaintyBox.from_dict(
-        {"source": "specified", "level": 0.9, "a1": {"rel": 0.02}, "alpha": {"abs": 0.01}}
-    )
-    again = UncertaintyBox.from_dict(tomllib.loads(box.to_toml())["uncertainty"])
-    assert again == box
-    assert box.half_width("a1", p) == pytest.approx(0.02 * p.a1)
-    assert box.half_width("beta", p) == 0.0
-    assert box.bounds(p)["alpha"] == pytest.approx((p.alpha - 0.01, p.alpha + 0.01))
-    verts = box.vertices(p)
-    assert len(verts) == 4
-    assert sorted({v.a1 for v in verts}) == pytest.approx([0.98 * p.a1, 1.02 * p.a1])
-    samples = box.sample(p, np.random.default_rng(0), 50)
-    assert all(abs(s.a1 - p.a1) <= 0.02 * p.a1 and s.beta == p.beta for s in samples)
-    assert box.check(p).bounded
-
-
-def test_uncertainty_check_names_vertices_outside_the_class():
-    p = preset("paper_experiment")  # beta 0.3762, gamma 0.0378
-    box = UncertaintyBox.from_dict({"gamma": {"abs": 0.5}})
-    verdict = box.check(p)
-    assert not verdict.bounded
-    assert any("beta - gamma" in r for _, r in verdict.outside)
-    assert any("beta + gamma" in r for _, r in verdict.outside)
-
-
-@pytest.mark.parametrize(
-    "table,match",
-    [
-        ({"a1": {"rel": 0.1, "abs": 1.0}}, "exactly one of rel"),
-        ({"a1": 0.1}, "must be a table"),
-        ({"a4": {"rel": 0.1}}, "unknown key"),
-        ({"a1": {"rel": -0.1}}, ">= 0"),
-        ({"a1": {"rel": "x"}}, "must be a number"),
-        ({"source": "guessed"}, "source must be one of"),
-        ({"level": 1.5}, r"level must be a number in \(0, 1\)"),
-    ],
-    ids=["both", "not_table", "unknown", "negative", "string", "source", "level"],
-)
-def test_uncertainty_strict_keys(table, match):
-    with pytest.raises(ConfigError, match=match):
-        UncertaintyBox.from_dict(table)
-
-
-def test_undetermined_box_refuses_vertices(tmp_path):
-    p = preset("paper_experiment")
-    box = UncertaintyBox.from_dict({"a1": {"rel": math.inf}, "alpha": {"abs": 0.01}})
-    assert box.undetermined() == ("a1",)
-    assert box.bounds(p)["a1"] == (-math.inf, math.inf)
-    with pytest.raises(ParameterError, match="a1 not determined"):
-        box.vertices(p)
-    with pytest.raises(ParameterError, match="a1 not determined"):
-        box.sample(p, np.random.default_rng(0), 3)
-    cfg = tmp_path / "s.toml"
-    cfg.write_text(p.to_toml() + "\n" + box.to_toml())
-    assert load_config(cfg).uncertainty == box
-    cfg.write_text(p.to_toml())
-    assert load_config(cfg).uncertainty is None
 
 
 # -- commands --------------------------------------------------------------------

@@ -12,7 +12,7 @@ import pytest
 from bwdesign import Sine, UncertaintyBox, preset
 from bwdesign.control.controllers import make_controller
 from bwdesign.control.tuning import digital_tuning
-from bwdesign.errors import InputError
+from bwdesign.errors import InputError, ParameterError
 from bwdesign.sim.batch import simulate_batch
 from bwdesign.sim.robust_design import synthesize_robust
 
@@ -49,7 +49,7 @@ def test_tuning_refuses_two_mismatch_sources_and_an_undetermined_box():
     with pytest.raises(InputError, match="not both"):
         digital_tuning(p, DT, mismatch=0.02, uncertainty=_box(a1=0.02))
     box = UncertaintyBox.from_dict({"a1": {"rel": float("inf")}})
-    with pytest.raises(InputError, match="a1 undetermined"):
+    with pytest.raises(ParameterError, match="a1 not determined"):
         digital_tuning(p, DT, uncertainty=box)
     with pytest.raises(InputError, match="UncertaintyBox"):
         digital_tuning(p, DT, uncertainty={"a1": 0.02})

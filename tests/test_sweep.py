@@ -16,13 +16,14 @@ from bwdesign import (
     Sine,
     TrackingController,
     Triangle,
+    UncertaintyBox,
     digital_tuning,
     hysteresis_increment,
     preset,
     simulate,
 )
 from bwdesign.cli.main import main
-from bwdesign.errors import InputError, UnboundedModelError
+from bwdesign.errors import ConfigError, InputError, ParameterError
 from bwdesign.model.config import load_config
 from bwdesign.model.envelope import derive_envelope
 from bwdesign.report.sweep import sweep_summary
@@ -34,7 +35,6 @@ from bwdesign.sim.sweep import (
     ROW_BYTES,
     SweepError,
     SweepSpec,
-    box_bounds,
     check_samples,
     check_scheduler,
     check_workers,
@@ -43,13 +43,13 @@ from bwdesign.sim.sweep import (
     max_workers,
     run_sweep,
     spec_from_config,
+    sweep_box,
 )
 
 DT = 2e-4
 P = preset("paper_experiment")
-BOX = {k: ("rel", 0.02) for k in ("a1", "a2", "a3")} | {
-    k: ("rel", 0.1) for k in ("alpha", "beta", "gamma")
-}
+BOX = UncertaintyBox.parse("a1=2%,a2=2%,a3=2%,alpha=10%,beta=10%,gamma=10%")
+EXACT = UncertaintyBox()  # every parameter exact: the scenarios differ in noise only
 
 
 @pytest.fixture(scope="module")
@@ -58,8 +58,8 @@ def tune():
 
 
 def _mismatched(n, seed):
-    cols = draw_scenarios(P, box_bounds(P, BOX), n, seed=seed)
-    return [replace(P, **{k: float(cols[k][i]) for k in BOX}) for i in range(n)], cols
+    cols = draw_scenarios(P, BOX, n, seed=seed)
+    return [replace(P, **{k: float(cols[k][i]) for k in BOX.widths}) for i in range(n)], cols
 
 
 def test_stacked_zoh_matches_discretize():
@@ -173,15 +173,16 @@ def test_batch_detects_divergence_per_scenario():
 
 
 def test_draw_depends_only_on_the_seed():
-    bounds = box_bounds(P, BOX)
-    a = draw_scenarios(P, bounds, 50, seed=7)
-    b = draw_scenarios(P, bounds, 50, seed=7)
-    c = draw_scenarios(P, bounds, 50, seed=8)
+    bounds = BOX.check(P)
+    assert list(bounds) == list(BOX.widths) == ["a1", "a2", "a3", "alpha", "beta", "gamma"]
+    a = draw_scenarios(P, BOX, 50, seed=7)
+    b = draw_scenarios(P, BOX, 50, seed=7)
+    c = draw_scenarios(P, BOX, 50, seed=8)
     assert all(np.array_equal(a[k], b[k]) for k in a)
     assert not np.array_equal(a["a1"], c["a1"])
     for k, (lo, hi) in bounds.items():
         assert np.all((a[k] >= lo) & (a[k] <= hi))
-    n = draw_scenarios(P, bounds, 2000, seed=1, distribution="normal")
+    n = draw_scenarios(P, BOX, 2000, seed=1, distribution="normal")
     for k, (lo, hi) in bounds.items():
         assert np.all((n[k] >= lo) & (n[k] <= hi))
         # truncated at the 95 % interval: the spread is narrower than the uniform's
@@ -228,7 +229,7 @@ def corner_sweep(tune):
         udot_max=env,
         envelope_source="the reference's, margin 1.1",
     )
-    sc = draw_scenarios(P, {}, 2, seed=0)  # scenario 0 nominal, scenario 1 the corner
+    sc = draw_scenarios(P, EXACT, 2, seed=0)  # scenario 0 nominal, scenario 1 the corner
     sc["a1"][1], sc["a3"][1] = 1.02 * P.a1, 0.98 * P.a3
     return spec, run_sweep(spec, sc, workers=0)
 
@@ -247,7 +248,7 @@ def test_rows_say_whether_the_input_stayed_in_the_envelope(corner_sweep):
     assert rep.replayed["input_rate_max"] == pytest.approx(rate[0], rel=1e-9)
     # no envelope named: rates recorded, nothing compared
     bare = replace(spec, udot_max=None, duration=1.0)
-    bare = run_sweep(bare, draw_scenarios(P, {}, 1), workers=0)
+    bare = run_sweep(bare, draw_scenarios(P, EXACT, 1), workers=0)
     assert "within_envelope" not in bare and 0 < bare["input_rate_max"][0] < np.inf
     assert sweep_summary(bare)["phso"]["outside_envelope"] is None
 
@@ -278,7 +279,7 @@ def _equal(a, b):
 
 def test_result_does_not_depend_on_chunks(tune):
     spec = _spec(tune)
-    sc = draw_scenarios(P, box_bounds(P, BOX), 12, seed=4)
+    sc = draw_scenarios(P, BOX, 12, seed=4)
     one = run_sweep(spec, sc, chunk_size=12, workers=0)
     many = run_sweep(spec, sc, chunk_size=5, workers=0)
     _equal(one, many)
@@ -291,7 +292,7 @@ def test_local_cluster_equals_single_process(tune):
     """A real dask.distributed LocalCluster with two worker processes, row for row."""
     pytest.importorskip("distributed")
     spec = _spec(tune)
-    sc = draw_scenarios(P, box_bounds(P, BOX), 16, seed=5)
+    sc = draw_scenarios(P, BOX, 16, seed=5)
     _equal(
         run_sweep(spec, sc, chunk_size=16, workers=0), run_sweep(spec, sc, chunk_size=3, workers=2)
     )
@@ -302,7 +303,7 @@ def test_a_scheduler_that_does_not_answer_times_out(tune):
     with socket.socket() as s:  # a port on this machine that nothing listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    sc = draw_scenarios(P, {}, 2, seed=0)
+    sc = draw_scenarios(P, EXACT, 2, seed=0)
     with pytest.raises(SweepError, match="no Dask scheduler answered"):
         run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tcp://127.0.0.1:{port}", timeout=2)
     # a well-formed tls:// address without a TLS configuration: said, not a TypeError
@@ -323,7 +324,7 @@ def test_a_failing_chunk_is_reported_not_dropped(tune, monkeypatch):
 
     real = sweep.run_chunk
     monkeypatch.setattr(sweep, "run_chunk", flaky)
-    sc = draw_scenarios(P, {}, 8, seed=0)
+    sc = draw_scenarios(P, EXACT, 8, seed=0)
     with pytest.raises(SweepError, match=r"scenarios 4\.\.7 failed after 2 retries"):
         run_sweep(_spec(tune, ("eso",)), sc, chunk_size=4, workers=0, retries=2)
     assert len(calls) == 1 + 3  # the good chunk once, the bad one 1 + 2 retries
@@ -331,24 +332,56 @@ def test_a_failing_chunk_is_reported_not_dropped(tune, monkeypatch):
 
 def test_bad_inputs(tune):
     with pytest.raises(InputError, match="> 0"):
-        draw_scenarios(P, {}, 0)
-    with pytest.raises(UnboundedModelError, match="bounded class"):
-        box_bounds(P, {"beta": ("rel", 0.95)})  # beta - gamma < 0 at a corner
-    with pytest.raises(InputError, match="stay > 0"):
-        box_bounds(P, {"a3": ("rel", 1.5)})
-    with pytest.raises(InputError, match="unknown parameter"):
-        box_bounds(P, {"zeta": ("rel", 0.1)})
+        draw_scenarios(P, EXACT, 0)
+    with pytest.raises(ParameterError, match="bounded class"):
+        draw_scenarios(P, UncertaintyBox.parse("beta=95%"), 3)  # beta - gamma < 0 at a corner
+    with pytest.raises(ParameterError, match="a3 must keep its sign"):
+        draw_scenarios(P, UncertaintyBox.parse("a3=150%"), 3)
+    with pytest.raises(InputError, match="UncertaintyBox"):
+        draw_scenarios(P, {"a1": ("rel", 0.02)}, 3)  # the old dict shape
+    with pytest.raises(ParameterError, match="bounded class"):
+        replace(_spec(tune), box=UncertaintyBox.parse("beta=95%"))  # the spec checks its box
+
+
+def test_a_listed_exact_parameter_is_drawn_at_its_nominal():
+    """``a2=0%`` lists a2 but does not vary it: nominal, also for the normal draw (which
+    crashed on main: the clip of a scalar gave a 0-d column)."""
+    box = UncertaintyBox.parse("a1=2%,a2=0%")
+    assert list(box.check(P)) == ["a1"]
+    for dist in ("uniform", "normal"):
+        cols = draw_scenarios(P, box, 5, seed=1, distribution=dist)
+        assert cols["a2"].shape == (5,) and np.all(cols["a2"] == P.a2)
+        same = draw_scenarios(P, UncertaintyBox.parse("a1=2%"), 5, seed=1, distribution=dist)
+        assert all(np.array_equal(cols[k], same[k]) for k in cols)
+
+
+def test_the_sweep_box_comes_from_the_stage_or_the_argument():
+    config = load_config("configs/stack_actuator_800hz.toml")
+    assert sweep_box(config) is config.uncertainty
+    mine = UncertaintyBox.parse("a1=1%")
+    assert sweep_box(config, mine) is mine
+    assert spec_from_config(config, uncertainty=mine).box is mine
+    assert spec_from_config(config).box == config.uncertainty
+    bare = load_config("configs/paper_experiment.toml")  # no [uncertainty]
+    with pytest.raises(ConfigError, match=r"no \[uncertainty\] section"):
+        sweep_box(bare)
+    with pytest.raises(ConfigError, match=r"no \[uncertainty\] section"):
+        spec_from_config(bare)
+    undetermined = UncertaintyBox.from_dict({"a1": {"rel": float("inf")}})
+    with pytest.raises(ParameterError, match="a1 not determined"):
+        sweep_box(bare, undetermined)
 
 
 def test_a_stage_sweep_compares_with_the_stages_envelope(tmp_path):
     """[envelope] when the stage has one (the certificates' assumption), else the reference's."""
     config = load_config("configs/paper_experiment.toml")
-    spec = spec_from_config(config)
+    box = UncertaintyBox.parse("a1=2%")
+    spec = spec_from_config(config, uncertainty=box)
     assert spec.udot_max == config.envelope().udot_max and "margin 1.1" in spec.envelope_source
     text = Path("configs/paper_experiment.toml").read_text()
     start, end = text.index("[envelope]"), text.index("[requirements]")
     (tmp_path / "s.toml").write_text(text[:start] + text[end:])
-    bare = spec_from_config(load_config(tmp_path / "s.toml"))
+    bare = spec_from_config(load_config(tmp_path / "s.toml"), uncertainty=box)
     assert bare.udot_max == derive_envelope(P, config.reference).udot_max
     assert "no [envelope]" in bare.envelope_source
 
@@ -381,7 +414,7 @@ def test_limits_are_checked_before_any_work(tune, monkeypatch):
         raise AssertionError("a chunk ran")
 
     monkeypatch.setattr(sweep, "run_chunk", no_work)
-    sc = draw_scenarios(P, {}, 2)
+    sc = draw_scenarios(P, EXACT, 2)
     for kw, match in (
         ({"workers": max_workers() + 1}, "worker processes"),
         ({"scheduler": "notaurl"}, "HOST:PORT"),
@@ -550,7 +583,7 @@ def test_sweep_runs_the_disturbance_observer(tune):
     from bwdesign.observers.gains import disturbance_gains_from
 
     spec = _spec(tune, ("phso", "phdo"))
-    sc = draw_scenarios(P, box_bounds(P, BOX), 4, seed=2)
+    sc = draw_scenarios(P, BOX, 4, seed=2)
     table = run_sweep(spec, sc, chunk_size=4, workers=0)
     assert set(table["observer"]) == {"phso", "phdo"}
     tps, _ = _mismatched(4, seed=2)

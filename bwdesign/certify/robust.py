@@ -283,7 +283,8 @@ def certify_robust(
     dt : float
         Sample time (s).
     uncertainty : UncertaintyBox
-        The box of true plants (finite half-widths).
+        The box of true plants: finite, every corner a bounded plant
+        (:meth:`UncertaintyBox.check`; ``ParameterError`` otherwise).
     udot_max : float
         Input-rate envelope (V/s) the certificate assumes: ``|du| <= udot_max dt``.
     reference : Reference
@@ -361,11 +362,10 @@ def certify_robust(
         integral=ctrl.integral_rate is not None,
         delay=bool(delay),
     )
+    uncertainty.check(params)  # every corner (so every plant in the box) bounded
     vertices = uncertainty.vertices(params)
     rng = np.random.default_rng(seed)
     interior = uncertainty.sample(params, rng, int(interior_samples))
-    for tp in [*vertices, *interior]:
-        require_bounded(tp)
     rho_lo, rho_hi = rho_interval(params, udot_max, dt)
     du = udot_max * dt
     # the PHDO's lumped error: rho = 1 in the loop, (rho - 1) e3 an input beside dh

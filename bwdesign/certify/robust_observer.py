@@ -257,12 +257,7 @@ def _problem(
         raise InputError(f"noise_max must be finite and >= 0, got {noise_max}")
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError("uncertainty must be an UncertaintyBox")
-    bad = uncertainty.undetermined()
-    if bad:
-        raise InputError(
-            f"the uncertainty box does not determine {', '.join(bad)} (infinite half-width); "
-            "give a finite range in [uncertainty] for a robust certificate"
-        )
+    uncertainty.check(params, bounded=False)  # a box leaving the class: "no", not an error
     try:
         u_lo, u_hi = (float(v) for v in input_range)
     except (TypeError, ValueError):

@@ -630,7 +630,11 @@ def certify(
         Malformed gains, or gains violating the paper's Hurwitz conditions (4).
     InputError
         ``udot_max``, ``decay`` or ``dt`` out of range; ``uncertainty`` without ``dt``
-        or ``input_range``, or with an undetermined (infinite) half-width.
+        or ``input_range``.
+    ParameterError
+        ``uncertainty`` with an undetermined (infinite) half-width or a corner that is
+        not a valid model (:meth:`UncertaintyBox.check`; a box leaving the bounded
+        class is a robust certificate that does not hold).
     UnboundedModelError
         The model is outside the bounded class and ``allow_unbounded`` is False.
 
@@ -655,12 +659,7 @@ def certify(
             )
         if not isinstance(uncertainty, UncertaintyBox):
             raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
-        bad = uncertainty.undetermined()
-        if bad:
-            raise InputError(
-                f"[uncertainty] {', '.join(bad)}: half-width not determined (inf); give a "
-                "finite range for a robust certificate"
-            )
+        uncertainty.check(params, bounded=False)  # a box leaving the class: "no", not an error
     sc = _scale_continuous(params, error_matrix(params, gains))
     if tiers is None:
         wanted = TIERS if dt is not None else TIERS[:3]

@@ -31,21 +31,13 @@ def _require(stage: Stage) -> None:
         missing.append("[reference]")
     if missing:
         raise UsageError(f"{cfg.source}: --robust needs {' and '.join(missing)}")
-    undetermined = cfg.uncertainty.undetermined()
-    if undetermined:
-        raise UsageError(
-            f"{cfg.source}: [uncertainty] leaves {', '.join(undetermined)} undetermined (inf): "
-            "give finite half-widths to design against"
-        )
+    cfg.uncertainty.check(stage.params)  # finite, every corner a bounded plant
 
 
 def _print(design: RobustDesign, stage: Stage) -> None:
     p = stage.params
     lu, iu = p.length_unit, p.input_unit
-    box = stage.config.uncertainty
-    widths = ", ".join(
-        f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in box.bounds(p).items() if lo != hi
-    )
+    widths = stage.config.uncertainty.describe(p)
     print(
         f"plant: {p.name or '(unnamed)'}   observer: {design.observer}   robust design over "
         f"the box: {widths}"

@@ -11,18 +11,15 @@ import argparse
 import math
 import sys
 
-from ..errors import InputError
 from ..extras import require
 from ..model.config import load_config
-from ..model.params import MODEL_FIELDS
+from ..model.uncertainty import UncertaintyBox
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from ..sim.sweep import (
     WORKERS_PER_CPU,
     SweepError,
     SweepSpec,
-    bounds_from_config,
-    box_bounds,
     check_observers,
     check_samples,
     check_scheduler,
@@ -36,44 +33,9 @@ from .args import EXIT_NO, EXIT_OK, nonneg_float, nonneg_int, positive_float, po
 __all__ = [
     "sweep_args",
     "run_sweep_command",
-    "parse_uncertainty",
     "parse_observers",
     "check_limits",
 ]
-
-
-def parse_uncertainty(text: str) -> dict[str, tuple[str, float]]:
-    """``"a1=2%,alpha=0.01"`` -> ``{"a1": ("rel", 0.02), "alpha": ("abs", 0.01)}``."""
-    out: dict[str, tuple[str, float]] = {}
-    for item in filter(None, (s.strip() for s in text.split(","))):
-        name, sep, value = item.partition("=")
-        name, value = name.strip(), value.strip()
-        if not sep or name not in MODEL_FIELDS:
-            raise InputError(
-                f"--uncertainty: expected NAME=WIDTH with NAME in {', '.join(MODEL_FIELDS)} "
-                f"(WIDTH as 2% relative or 0.01 absolute), got {item!r}"
-            )
-        rel = value.endswith("%")
-        try:
-            w = float(value[:-1] if rel else value)
-        except ValueError:
-            raise InputError(f"--uncertainty: {name}: not a number: {value!r}") from None
-        if not math.isfinite(w) or w < 0:
-            raise InputError(f"--uncertainty: {name}: half-width must be >= 0, got {value!r}")
-        if name in out:
-            raise InputError(
-                f"--uncertainty: {name} given twice ({_width(out[name])} and {value}); "
-                "give each parameter once"
-            )
-        out[name] = ("rel", w / 100) if rel else ("abs", w)
-    if not out:
-        raise InputError("--uncertainty: no parameter given")
-    return out
-
-
-def _width(spec: tuple[str, float]) -> str:
-    kind, w = spec
-    return f"{100 * w:g}%" if kind == "rel" else f"{w:g}"
 
 
 def parse_observers(text: str) -> tuple[str, ...]:
@@ -81,18 +43,19 @@ def parse_observers(text: str) -> tuple[str, ...]:
     return check_observers(tuple(o.strip().lower() for o in text.split(",") if o.strip()))
 
 
-def check_limits(args: argparse.Namespace) -> tuple[tuple[str, ...], dict | None]:
+def check_limits(args: argparse.Namespace) -> tuple[tuple[str, ...], UncertaintyBox | None]:
     """Every limit the arguments alone decide, before any file is read or any work done.
 
-    Returns the observers and the parsed ``--uncertainty`` (None without it).
+    Returns the observers and the ``--uncertainty`` box (None without it).
     """
     observers = parse_observers(args.observers)
     check_samples(args.samples, len(observers))
     if args.scheduler is None:
         check_workers(args.workers)
     check_scheduler(args.scheduler)
-    widths = None if args.uncertainty is None else parse_uncertainty(args.uncertainty)
-    return observers, widths
+    if args.uncertainty is None:
+        return observers, None
+    return observers, UncertaintyBox.parse(args.uncertainty, name="--uncertainty")
 
 
 def sweep_args(p: argparse.ArgumentParser) -> None:
@@ -190,7 +153,7 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
 
 
-def _spec(config, args, observers) -> SweepSpec:
+def _spec(config, args, observers, box) -> SweepSpec:
     return spec_from_config(
         config,
         tuning=args.tuning,
@@ -200,6 +163,7 @@ def _spec(config, args, observers) -> SweepSpec:
         duration=args.duration,
         delay=args.delay,
         start=args.start,
+        uncertainty=box,
     )
 
 
@@ -241,16 +205,12 @@ def _envelope_text(spec: SweepSpec, s: dict) -> str:
 def run_sweep_command(args: argparse.Namespace) -> int:
     from ..report.sweep import write_sweep
 
-    observers, widths = check_limits(args)
+    observers, box = check_limits(args)
     target = prepare_directory(args.out, command="sweep", force=args.force, what="--out")
     config = load_config(args.config)
-    spec = _spec(config, args, observers)
-    if widths is not None:
-        bounds = box_bounds(spec.params, widths)
-    else:
-        bounds = bounds_from_config(config)
+    spec = _spec(config, args, observers, box)
     scenarios = draw_scenarios(
-        spec.params, bounds, args.samples, seed=args.seed, distribution=args.distribution
+        spec.params, spec.box, args.samples, seed=args.seed, distribution=args.distribution
     )
     progress, bar = _progress(args.quiet)
     try:
@@ -270,14 +230,14 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     settings = {"seed": args.seed, "distribution": args.distribution, "samples": args.samples}
-    summary = write_sweep(target, spec, table, bounds, settings)
+    summary = write_sweep(target, spec, table, settings)
     if args.json:
         print(
             dump_json(
                 {
                     "out_dir": str(args.out),
                     "summary": summary,
-                    "bounds": bounds,
+                    "bounds": spec.box.check(spec.params),
                     "columns": list(table),
                 }
             )

@@ -172,14 +172,9 @@ def _mismatch_plants(
                 for d3 in (-mismatch, mismatch)
             ]
         return truths, {"a1": mismatch, "a3": mismatch}
+    box.check(params, bounded=False)
     linear = ("a1", "a2", "a3")
     checked = {k: box.half_width(k, params) / abs(getattr(params, k)) for k in linear}
-    if not all(math.isfinite(v) for v in checked.values()):
-        raise InputError(
-            "the uncertainty box leaves "
-            + ", ".join(k for k, v in checked.items() if not math.isfinite(v))
-            + " undetermined (infinite half-width): give a finite range to tune against"
-        )
     seen = {tuple(getattr(params, k) for k in linear)}
     truths = [None]
     for v in box.vertices(params):
@@ -312,7 +307,9 @@ def digital_tuning(
         Choose against this box instead of ``mismatch``: the margins must hold
         at every corner of its linear part ``(a1, a2, a3)`` (the hysteresis
         parameters do not enter the linear margins; :func:`bwdesign.certify_robust`
-        covers them). Not together with ``mismatch``.
+        covers them). Not together with ``mismatch``. Every half-width finite and
+        every corner a valid model (:meth:`UncertaintyBox.check` with
+        ``bounded=False``; ``ParameterError`` otherwise).
     delay : bool
         Include a one-sample computation delay (delay-compensated law).
     min_gain_margin_db, min_phase_margin : float

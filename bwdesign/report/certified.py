@@ -42,7 +42,7 @@ from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
-from ..sim.sweep import bounds_from_config, check_samples
+from ..sim.sweep import check_samples, sweep_box
 from .document import Document
 from .document import fmt as _fmt
 from .robust import robust_section
@@ -377,7 +377,7 @@ def build_report(
     if config.gains is not None:
         check_gains(params, config.gains)
     if config.sweep is not None:
-        bounds_from_config(config)  # [sweep] needs a finite [uncertainty] box: say so now
+        sweep_box(config)  # [sweep] needs a usable [uncertainty] box: say so now
         try:
             check_samples(config.sweep["samples"], len(config.sweep["observers"]))
         except InputError as err:

@@ -81,9 +81,8 @@ def robust_section(doc: Any, config: StageConfig, tuning: Any, udot_max: float) 
     params, box, ref, dt = config.plant, config.uncertainty, config.reference, float(config.dt)
     lu, iu = params.length_unit, params.input_unit
     loops = [_loop(config, tuning, udot_max, obs) for obs in _OBSERVERS]
-    bounds = box.bounds(params)
     doc.heading("Robust certificate over the uncertainty box")
-    widths = ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in bounds.items() if lo != hi)
+    widths = box.describe(params)
     n_corners = loops[0]["certificate"].n_vertices
     doc.para(
         f"Box: {widths} ({n_corners} corners). Loop: the digital tuning (observer gains "

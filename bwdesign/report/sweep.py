@@ -11,13 +11,7 @@ import numpy as np
 
 from ..output.files import DirectoryTarget
 from ..sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, RowReplay, replay_row
-from ..sim.sweep import (
-    SweepSpec,
-    bounds_from_config,
-    draw_scenarios,
-    run_sweep,
-    spec_from_config,
-)
+from ..sim.sweep import SweepSpec, draw_scenarios, run_sweep, spec_from_config
 from .document import Document
 
 __all__ = ["sweep_document", "sweep_summary", "sweep_section", "write_sweep"]
@@ -127,17 +121,17 @@ def sweep_section(doc: Document, config: Any, figs: Path) -> dict[str, Any]:
         noise_std=cfg.get("noise_std_um", 0.0),
         duration=cfg.get("duration_s"),
     )
-    bounds = bounds_from_config(config)
+    bounds = spec.box.check(spec.params)
     seed, n = cfg.get("seed", 0), cfg["samples"]
     dist = cfg.get("distribution", "uniform")
-    scenarios = draw_scenarios(spec.params, bounds, n, seed=seed, distribution=dist)
+    scenarios = draw_scenarios(spec.params, spec.box, n, seed=seed, distribution=dist)
     table = run_sweep(spec, scenarios, chunk_size=n, workers=0)
     summary = sweep_summary(table, udot_max=spec.udot_max)
     lu = spec.params.length_unit
     doc.heading("Robustness over the uncertainty box (Monte Carlo)")
-    box = ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in bounds.items())
     doc.para(
-        f"{n} scenarios drawn {dist} from the [uncertainty] box ({box}), seed {seed}; the "
+        f"{n} scenarios drawn {dist} from the [uncertainty] box "
+        f"({spec.box.describe(spec.params)}), seed {seed}; the "
         f"{cfg.get('tuning', 'config')} tuning, sensor noise {spec.noise_std:g} {lu}, "
         f"{spec.duration:g} s per scenario, starting "
         f"{'on the reference' if spec.start == 'reference' else 'from rest'}; metrics over "
@@ -157,16 +151,19 @@ def sweep_section(doc: Document, config: Any, figs: Path) -> dict[str, Any]:
 def sweep_document(
     spec: SweepSpec,
     table: Mapping[str, np.ndarray],
-    bounds: Mapping[str, tuple[float, float]],
     *,
     out_dir: Path,
     settings: Mapping[str, Any],
 ) -> tuple[Document, dict[str, Any]]:
-    """Build the report; figures are written under ``out_dir/figures`` (a staging path)."""
+    """Build the report; figures are written under ``out_dir/figures`` (a staging path).
+
+    The box table lists the parameters ``spec.box`` varies.
+    """
     from ..plotting import figures as plotting
     from ..plotting.sweep import plot_sweep_histograms
 
     lu = spec.params.length_unit
+    bounds = spec.box.check(spec.params)
     summary = sweep_summary(table, udot_max=spec.udot_max)
     doc = Document(title=f"Monte Carlo sweep: {spec.params.name or 'stage'}")
     n = len(np.unique(table["scenario"]))
@@ -309,7 +306,6 @@ def write_sweep(
     target: DirectoryTarget,
     spec: SweepSpec,
     table: Mapping[str, np.ndarray],
-    bounds: Mapping[str, tuple[float, float]],
     settings: Mapping[str, Any],
 ) -> dict[str, Any]:
     """Write ``scenarios.parquet``, ``summary.json``, ``report.md``/``.html`` and figures.
@@ -323,11 +319,11 @@ def write_sweep(
     with target.stage() as stage:
         columns = {k: (v.tolist() if v.dtype == object else v) for k, v in table.items()}
         pq.write_table(pa.table(columns), stage.file("scenarios.parquet"))
-        doc, summary = sweep_document(spec, table, bounds, out_dir=stage.root, settings=settings)
+        doc, summary = sweep_document(spec, table, out_dir=stage.root, settings=settings)
+        bounds = spec.box.check(spec.params)
         stage.write_text(
             "summary.json",
-            dump_json({"summary": summary, "bounds": dict(bounds), "settings": dict(settings)})
-            + "\n",
+            dump_json({"summary": summary, "bounds": bounds, "settings": dict(settings)}) + "\n",
         )
         stage.write_text("report.md", doc.to_markdown())
         stage.write_text("report.html", doc.to_html(stage.root))

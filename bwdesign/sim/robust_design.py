@@ -286,6 +286,7 @@ def synthesize_robust(
     """
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
+    uncertainty.check(params)  # before any work: what certify_robust needs of the box
     if observer not in ("phso", "phdo"):
         raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
     if isinstance(max_candidates, bool) or not isinstance(max_candidates, int):

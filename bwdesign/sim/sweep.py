@@ -1,5 +1,8 @@
 """Monte Carlo sweeps: scenarios drawn from an uncertainty box, run in chunks, locally or on Dask.
 
+- The box is a :class:`~bwdesign.UncertaintyBox` (the stage's ``[uncertainty]``, or
+  ``bwdesign sweep --uncertainty``: :func:`sweep_box`), held by the :class:`SweepSpec`
+  and checked against its parameters (:meth:`~bwdesign.UncertaintyBox.check`).
 - :func:`draw_scenarios` draws the true parameters (uniform in the box, or a
   normal truncated to the box whose half-widths are ``level`` confidence
   intervals) and a noise seed per scenario from one seeded generator, all at
@@ -29,7 +32,7 @@ import math
 import os
 import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any
 
@@ -37,10 +40,11 @@ import numpy as np
 
 from .. import interrupts
 from ..control.loop import ON_REFERENCE, ClosedLoop, Start
-from ..errors import BWDesignError, InputError, UnboundedModelError
+from ..errors import BWDesignError, ConfigError, InputError
 from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
+from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import gains_for_observer
 from ..observers.spec import ObserverSpec
 from ..validate import UDOT_MAX, Range, integer, real
@@ -53,10 +57,8 @@ __all__ = [
     "draw_scenarios",
     "run_chunk",
     "run_sweep",
-    "box_bounds",
-    "check_box",
     "spec_from_config",
-    "bounds_from_config",
+    "sweep_box",
     "check_samples",
     "check_workers",
     "check_scheduler",
@@ -123,6 +125,10 @@ class SweepSpec:
         (``within_envelope``). None: rates are recorded, not compared.
     envelope_source : str
         Where ``udot_max`` comes from, for reports.
+    box : UncertaintyBox
+        The box the scenarios are drawn from (:func:`draw_scenarios`); checked
+        against ``params`` here (:meth:`UncertaintyBox.check`). Default: empty,
+        every parameter exact.
     """
 
     loop: ClosedLoop
@@ -133,6 +139,7 @@ class SweepSpec:
     noise_std: float = 0.0
     udot_max: float | None = None
     envelope_source: str = ""
+    box: UncertaintyBox = field(default_factory=UncertaintyBox)
 
     def loop_for(self, observer: str) -> ClosedLoop:
         """The loop with ``observer`` on the design gains (the PHDO on ``(l1, l2, 0, l3)``)."""
@@ -170,6 +177,9 @@ class SweepSpec:
         check_observers(self.observers)
         if self.udot_max is not None:
             real(self.udot_max, "udot_max (input unit/s)", within=UDOT_MAX)
+        if not isinstance(self.box, UncertaintyBox):
+            raise InputError(f"box must be an UncertaintyBox, got {self.box!r}")
+        self.box.check(self.params)
 
 
 def check_observers(observers: Sequence[str]) -> tuple[str, ...]:
@@ -288,65 +298,9 @@ def check_samples(n: Any, n_observers: int = 1) -> int:
     return n
 
 
-def box_bounds(
-    params: BoucWenParams, half_widths: Mapping[str, tuple[str, float]]
-) -> dict[str, tuple[float, float]]:
-    """``{name: (lo, hi)}`` from ``{name: ("rel" | "abs", half-width)}``.
-
-    Raises
-    ------
-    InputError
-        Unknown parameter, negative or non-finite half-width.
-    UnboundedModelError
-        A corner of the box leaves the bounded class (alpha > 0, beta + gamma > 0,
-        beta - gamma >= 0 are linear in the parameters, so the corners decide).
-    """
-    out = {}
-    for name, (kind, w) in half_widths.items():
-        if name not in MODEL_FIELDS:
-            raise InputError(f"unknown parameter {name!r}; uncertain parameters: {MODEL_FIELDS}")
-        if not (isinstance(w, int | float) and math.isfinite(w) and w >= 0):
-            raise InputError(f"half-width of {name} must be a finite number >= 0, got {w!r}")
-        nominal = getattr(params, name)
-        half = abs(nominal) * w if kind == "rel" else w
-        out[name] = (nominal - half, nominal + half)
-    return check_box(params, out)
-
-
-def check_box(
-    params: BoucWenParams, bounds: Mapping[str, tuple[float, float]]
-) -> dict[str, tuple[float, float]]:
-    """``bounds`` as a dict, after checking that every corner of the box is a usable plant.
-
-    Raises
-    ------
-    InputError
-        A gain parameter (a1, a2, a3) can reach 0 or below.
-    UnboundedModelError
-        A corner leaves the bounded class.
-    """
-    for name in ("a1", "a2", "a3"):
-        if name in bounds and bounds[name][0] <= 0:
-            raise InputError(f"the box lets {name} reach {bounds[name][0]:g}; it must stay > 0")
-    lo = {k: bounds.get(k, (getattr(params, k),) * 2)[0] for k in ("alpha", "beta", "gamma")}
-    hi = {k: bounds.get(k, (getattr(params, k),) * 2)[1] for k in ("alpha", "beta", "gamma")}
-    worst = {
-        "alpha > 0": lo["alpha"],
-        "beta + gamma > 0": lo["beta"] + lo["gamma"],
-        "beta - gamma >= 0": lo["beta"] - hi["gamma"],
-    }
-    for cond, value in worst.items():
-        if value < 0 or (value == 0 and ">=" not in cond):
-            raise UnboundedModelError(
-                f"the uncertainty box leaves the bounded class: at its worst corner {cond} "
-                f"is {value:.6g}; narrow the box"
-            )
-    return {k: (float(lo_), float(hi_)) for k, (lo_, hi_) in bounds.items()}
-
-
 def draw_scenarios(
     params: BoucWenParams,
-    bounds: Mapping[str, tuple[float, float]],
+    box: UncertaintyBox,
     n: int,
     *,
     seed: int = 0,
@@ -355,10 +309,19 @@ def draw_scenarios(
 ) -> dict[str, np.ndarray]:
     """Draw ``n`` scenarios: columns ``scenario``, the six parameters, ``noise_seed``.
 
-    ``uniform``: independent uniform in ``bounds``. ``normal``: independent normal
-    around the nominal value with the half-width as the ``level`` interval
-    (sigma = half-width / z), truncated to the box (inverse-CDF sampling, so one
-    uniform number per parameter and scenario as for ``uniform``).
+    ``uniform``: independent uniform in the box around ``params``. ``normal``:
+    independent normal around the nominal value with the half-width as the ``level``
+    interval (sigma = half-width / z), truncated to the box (inverse-CDF sampling, so
+    one uniform number per parameter and scenario as for ``uniform``). A parameter the
+    box does not vary keeps its nominal value.
+
+    Raises
+    ------
+    InputError
+        Bad ``n``, ``seed``, ``distribution`` or ``level``; ``box`` not an
+        :class:`UncertaintyBox`.
+    ParameterError
+        A corner of the box is not a usable plant (:meth:`UncertaintyBox.check`).
     """
     check_samples(n)
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
@@ -367,7 +330,9 @@ def draw_scenarios(
         raise InputError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
     if not 0 < level < 1:
         raise InputError(f"level must be in (0, 1), got {level!r}")
-    check_box(params, bounds)
+    if not isinstance(box, UncertaintyBox):
+        raise InputError(f"box must be an UncertaintyBox, got {box!r}")
+    bounds = box.check(params)
     rng = np.random.default_rng(int(seed))
     cols: dict[str, np.ndarray] = {"scenario": np.arange(int(n), dtype=np.int64)}
     nd = NormalDist()
@@ -600,16 +565,17 @@ def spec_from_config(
     duration: float | None = None,
     delay: bool = False,
     start: str = "reference",
+    uncertainty: UncertaintyBox | None = None,
 ) -> SweepSpec:
     """The sweep of a stage's loop: ``tuning="config"`` runs the ``[observer]`` gains and
     ``[controller]`` constants (eq. 12 in ``form``), ``"digital"`` the digital tuning
     (:func:`bwdesign.digital_tuning`); ``[controller]`` limits apply in both. ``duration``
     defaults to three reference periods, at least 1 s. ``udot_max`` is the stage's
     ``[envelope]`` (the one its certificates assume), else the envelope the reference
-    itself needs (:func:`bwdesign.derive_envelope`, margin 1).
+    itself needs (:func:`bwdesign.derive_envelope`, margin 1). The box is
+    ``uncertainty``, else the stage's ``[uncertainty]`` (:func:`sweep_box`).
     """
     from ..control.tuning import digital_tuning
-    from ..errors import ConfigError
 
     if tuning not in ("config", "digital"):
         raise InputError(f"tuning must be 'config' or 'digital', got {tuning!r}")
@@ -623,6 +589,7 @@ def spec_from_config(
             missing.append("[controller] (or the digital tuning)")
     if missing:
         raise ConfigError(f"{config.source or 'config'}: a sweep needs {', '.join(missing)}")
+    box = sweep_box(config, uncertainty)
     if start not in ("reference", "rest"):
         raise InputError(f"start must be 'reference' or 'rest', got {start!r}")
     law = digital_tuning(config.plant, config.dt) if tuning == "digital" else None
@@ -646,6 +613,7 @@ def spec_from_config(
         noise_std=noise_std,
         udot_max=udot_max,
         envelope_source=source,
+        box=box,
     )
 
 
@@ -668,22 +636,24 @@ def _stage_envelope(config: Any) -> tuple[float | None, str]:
     return env.udot_max, "derived from [reference] (no [envelope] in the stage; margin 1)"
 
 
-def bounds_from_config(config: Any) -> dict[str, tuple[float, float]]:
-    """The box of the stage's ``[uncertainty]`` section (its uncertain parameters only)."""
-    from ..errors import ConfigError
+def sweep_box(config: Any, uncertainty: UncertaintyBox | None = None) -> UncertaintyBox:
+    """The box a stage's sweep draws from: ``uncertainty`` (``bwdesign sweep --uncertainty``),
+    else the stage's ``[uncertainty]``, after checking it against the stage's plant.
 
-    box = getattr(config, "uncertainty", None)
+    Raises
+    ------
+    ConfigError
+        Neither is given.
+    ParameterError
+        A corner of the box is not a usable plant (:meth:`UncertaintyBox.check`).
+    """
+    box = getattr(config, "uncertainty", None) if uncertainty is None else uncertainty
     if box is None:
         raise ConfigError(
             f"{config.source or 'config'}: no [uncertainty] section to draw the scenarios "
             "from (bwdesign sweep also takes --uncertainty)"
         )
-    b = box.bounds(config.plant)
-    open_ = [k for k, (lo, hi) in b.items() if not (math.isfinite(lo) and math.isfinite(hi))]
-    if open_:
-        raise ConfigError(
-            f"{config.source or 'config'}: [uncertainty] leaves {', '.join(open_)} undetermined "
-            "(infinite half-width); a sweep needs a finite box (finite half-widths, or "
-            "bwdesign sweep --uncertainty)"
-        )
-    return check_box(config.plant, {k: v for k, v in b.items() if v[0] != v[1]})
+    if not isinstance(box, UncertaintyBox):
+        raise InputError(f"uncertainty must be an UncertaintyBox, got {box!r}")
+    box.check(config.plant)
+    return box
