@@ -182,6 +182,7 @@ def test_observer_object_and_factory(experiment):
     custom = loop(experiment).replace(observer=ObserverSpec.from_custom(obs))
     a = simulate(custom, SINE, duration=0.2)
     np.testing.assert_array_equal(obs.x, x_before)  # the caller's object is not advanced
+    assert a.settings["path"] == "generic"  # a custom observer runs its own methods
     b = simulate(loop(experiment), SINE, duration=0.2)
     np.testing.assert_allclose(a.x, b.x, atol=1e-9)
     factory = ObserverSpec.from_custom(lambda p, dt: HysteresisObserver(p, FAST, dt))
