@@ -44,9 +44,20 @@ from typing import Any
 import numpy as np
 
 import bwdesign
-from bwdesign import Sine, Step, Triangle, preset
+from bwdesign import (
+    ClosedLoop,
+    ContinuousSolver,
+    ObserverSpec,
+    Sine,
+    Start,
+    Step,
+    Triangle,
+    make_controller,
+    preset,
+)
 from bwdesign.control.analysis import analyze_loop, mismatch_sweep
 from bwdesign.control.tuning import digital_tuning, observer_gains
+from bwdesign.model.params import BoucWenParams
 from bwdesign.output.files import prepare_directory
 from bwdesign.sim.closed_loop import simulate
 from bwdesign.sim.continuous import simulate_continuous
@@ -89,22 +100,48 @@ def improvement(eso: float, phso: float) -> float:
     return 100.0 * (eso - phso) / eso if eso else math.nan
 
 
+def make_loop(
+    p: BoucWenParams,
+    observer: str,
+    *,
+    gains: Any,
+    lambda1: float,
+    lambda2: float,
+    dt: float | None = None,
+    form: str = "continuous",
+    integral_rate: float | None = None,
+    u_limits: Any = None,
+    hysteresis_jump: bool = False,
+    delay: bool = False,
+    start: Start | None = None,
+) -> ClosedLoop:
+    """``observer`` on ``gains`` (the PHDO on ``(l1, l2, 0, l3)`` of 3), eq. (12) in ``form``."""
+    law = make_controller(
+        p, lambda1, lambda2, form=form, dt=dt, integral_rate=integral_rate,
+        u_limits=u_limits, hysteresis_jump=hysteresis_jump,
+    )  # fmt: skip
+    spec = ObserverSpec.of(observer, gains)
+    return ClosedLoop(p, spec, law, dt=dt, delay=delay, start=start or Start())
+
+
 # -- worker tasks (module level so the process pool can pickle them) ---------------
+# A task names its plant, its reference, its loop (make_loop's keywords) and its run
+# (the simulation's keywords; "true": the relative changes of the simulated plant).
 
 
 def run_continuous(task: dict[str, Any]) -> SimulationResult:
     p = preset(task["plant"])
-    return simulate_continuous(p, task["reference"], **task["kw"])
+    loop = make_loop(p, **task["loop"])
+    return simulate_continuous(loop, task["reference"], **task["run"])
 
 
 def run_sampled(task: dict[str, Any]) -> SimulationResult:
     p = preset(task["plant"])
-    kw = dict(task["kw"])
-    if "true" in kw and kw["true"] is not None:
-        kw["true_params"] = p.replace(**kw.pop("true"))
-    else:
-        kw.pop("true", None)
-    return simulate(p, task["reference"], **kw)
+    run = dict(task["run"])
+    true = run.pop("true", None)
+    if true is not None:
+        run["true_params"] = p.replace(**true)
+    return simulate(make_loop(p, **task["loop"]), task["reference"], **run)
 
 
 def run_task(task: dict[str, Any]) -> SimulationResult:
@@ -240,7 +277,8 @@ def _run(args: argparse.Namespace, out: Path) -> int:
                 kind="continuous",
                 plant="paper_simulation_corrected",
                 reference=ref,
-                kw=dict(duration=dur, observer=obs.lower(), **SEC42),
+                loop=dict(observer=obs.lower(), **SEC42),
+                run=dict(duration=dur),
             )
     refs2 = {
         "sine": Sine(amplitude=80, offset=100, frequency=1),
@@ -264,27 +302,22 @@ def _run(args: argparse.Namespace, out: Path) -> int:
                 kind="sampled",
                 plant="paper_experiment",
                 reference=ref,
-                kw=dict(dt=DT, duration=dur_paper, observer=obs.lower(), **SEC5),
+                loop=dict(observer=obs.lower(), dt=DT, **SEC5),
+                run=dict(duration=dur_paper),
             )
             tasks[("t2paper", name, obs, "noise+mismatch")] = dict(
                 kind="sampled",
                 plant="paper_experiment",
                 reference=ref,
-                kw=dict(
-                    dt=DT,
-                    duration=dur_paper,
-                    observer=obs.lower(),
-                    noise_std=NOISE_STD,
-                    seed=2,
-                    true=full_plus,
-                    **SEC5,
-                ),
+                loop=dict(observer=obs.lower(), dt=DT, **SEC5),
+                run=dict(duration=dur_paper, noise_std=NOISE_STD, seed=2, true=full_plus),
             )
         tasks[("t2paper_discrete", name, "PHSO")] = dict(
             kind="sampled",
             plant="paper_experiment",
             reference=ref,
-            kw=dict(dt=DT, duration=dur_paper_d, observer="phso", form="discrete", **SEC5),
+            loop=dict(observer="phso", dt=DT, form="discrete", **SEC5),
+            run=dict(duration=dur_paper_d),
         )
 
     log(f"{len(tasks)} long runs on {args.jobs} worker(s)")
@@ -336,14 +369,8 @@ def _run(args: argparse.Namespace, out: Path) -> int:
                         dict(
                             plant="paper_experiment",
                             reference=ref,
-                            kw=dict(
-                                dt=DT,
-                                duration=3.0,
-                                observer=obs.lower(),
-                                delay=True,
-                                **tko,
-                                **extra,
-                            ),
+                            loop=dict(observer=obs.lower(), dt=DT, delay=True, **tko),
+                            run=dict(duration=3.0, **extra),
                         )
                     )
 
@@ -894,9 +921,8 @@ def decay_check(exp, tuning) -> list[dict[str, Any]]:
             form=kw.get("form", "continuous"),
             **akw,
         )
-        r = simulate(
-            exp, hold, dt=DT, duration=win[1] + 0.01, observer="phso", xhat0=(2.0, 0, 0), **kw
-        )
+        loop = make_loop(exp, "phso", dt=DT, start=Start(xhat0=(2.0, 0, 0)), **kw)
+        r = simulate(loop, hold, duration=win[1] + 0.01)
         sel = (r.t >= win[0]) & (r.t <= win[1])
         rate = -np.polyfit(r.t[sel], np.log(np.abs(r.e[sel])), 1)[0]
         rows.append(
@@ -921,25 +947,21 @@ def peaking_runs(exp, sim) -> dict[str, Any]:
     lam = 1000.0
     base = dict(
         dt=dt,
-        duration=0.3,
         gains=g_fast,
         lambda1=lam,
         lambda2=lam,
         form="discrete",
         integral_rate=lam / 2,
         delay=True,
-        x0=(20.0, 0.0, 0.0),
-        xhat0=(20.0, 0.0, 0.0),
-        u_prev=20.0 * exp.a1 / exp.a3,
+        start=Start(x0=(20.0, 0.0, 0.0), xhat0=(20.0, 0.0, 0.0), u_prev=20.0 * exp.a1 / exp.a3),
     )
     sharp = Step(amplitude=100.0, offset=20.0, t_step=0.05)
     smooth = Step(amplitude=100.0, offset=20.0, t_step=0.05, rise_time=0.01)
     out: dict[str, Any] = {"before": {}, "after": {}, "settings": {}}
     for obs in ("ESO", "PHSO"):
-        out["before"][obs] = simulate(exp, sharp, observer=obs.lower(), **base)
-        out["after"][obs] = simulate(
-            exp, smooth, observer=obs.lower(), u_limits=U_LIMITS_EXP, **base
-        )
+        out["before"][obs] = simulate(make_loop(exp, obs.lower(), **base), sharp, duration=0.3)
+        limited = make_loop(exp, obs.lower(), u_limits=U_LIMITS_EXP, **base)
+        out["after"][obs] = simulate(limited, smooth, duration=0.3)
     out["settings"] = {
         "gains": g_fast,
         "lambda": lam,
@@ -953,7 +975,10 @@ def peaking_runs(exp, sim) -> dict[str, Any]:
     ref = Step(amplitude=30.0, offset=0.0, t_step=0.01)
     out["continuous"] = {
         obs: simulate_continuous(
-            sim, ref, duration=0.08, observer=obs.lower(), output_dt=1e-5, **SEC42
+            make_loop(sim, obs.lower(), **SEC42),
+            ref,
+            duration=0.08,
+            solver=ContinuousSolver(output_dt=1e-5),
         )
         for obs in ("ESO", "PHSO")
     }

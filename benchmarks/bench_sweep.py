@@ -32,13 +32,16 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from bwdesign import (
+    ClosedLoop,
     DiscreteTrackingController,
+    ObserverSpec,
     Sine,
     UncertaintyBox,
     digital_tuning,
     preset,
     simulate,
 )
+from bwdesign.control.loop import ON_REFERENCE
 from bwdesign.model.plant import hysteresis_increment, zoh_step
 from bwdesign.sim.batch import simulate_batch
 from bwdesign.sim.sweep import SweepSpec, draw_scenarios, run_sweep
@@ -54,33 +57,26 @@ def _setup():
     ctl = DiscreteTrackingController(
         p, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
     )
-    return p, tune, ctl, Sine(amplitude=80, offset=100, frequency=1)
+    loop = ClosedLoop(p, ObserverSpec.of("phso", tune.gains), ctl, dt=DT)
+    return p, tune, loop, Sine(amplitude=80, offset=100, frequency=1)
 
 
 def batched(n: int) -> float:
-    p, tune, ctl, ref = _setup()
+    p, _, loop, ref = _setup()
     cols = draw_scenarios(p, BOX, n, seed=0)
     tps = [replace(p, **{k: float(cols[k][i]) for k in BOX.widths}) for i in range(n)]
     duration = 1.0
     t0 = time.perf_counter()
     res = simulate_batch(
-        p,
-        ref,
-        tps,
-        dt=DT,
-        duration=duration,
-        controller=ctl,
-        gains=tune.gains,
-        noise_std=0.02,
-        seeds=cols["noise_seed"],
+        loop, ref, tps, duration=duration, noise_std=0.02, seeds=cols["noise_seed"]
     )
     return n * res.samples / (time.perf_counter() - t0)
 
 
 def scalar() -> float:
-    p, tune, ctl, ref = _setup()
+    _, _, loop, ref = _setup()
     t0 = time.perf_counter()
-    simulate(p, ref, dt=DT, duration=1.0, controller=ctl, gains=tune.gains, noise_std=0.02)
+    simulate(loop, ref, duration=1.0, noise_std=0.02)
     return 5000 / (time.perf_counter() - t0)
 
 
@@ -107,16 +103,15 @@ def ivp(steps: int = 300) -> tuple[float, float]:
 
 
 def sweep_time(n: int, workers: int) -> float:
-    p, tune, ctl, ref = _setup()
+    p, tune, loop, ref = _setup()
     spec = SweepSpec(
-        params=p,
+        loop=loop.replace(start=ON_REFERENCE),  # as every sweep: started on the reference
         reference=ref,
-        dt=DT,
         duration=1.0,
-        controller=ctl,
         gains=tuple(tune.gains),
         observers=("phso",),
         noise_std=0.02,
+        box=BOX,
     )
     sc = draw_scenarios(p, BOX, n, seed=0)
     t0 = time.perf_counter()

@@ -22,10 +22,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bwdesign import BoucWenParams, Sine, UncertaintyBox, certify, preset, simulate, synthesize
+from bwdesign import (
+    BoucWenParams,
+    ClosedLoop,
+    ObserverSpec,
+    Sine,
+    Start,
+    UncertaintyBox,
+    certify,
+    make_controller,
+    preset,
+    simulate,
+    synthesize,
+)
 from bwdesign.cli.main import main
 from bwdesign.control.controllers import TrackingController
-from bwdesign.errors import ConfigError, InputError, ParameterError
+from bwdesign.errors import ConfigError, GainError, InputError, ParameterError
 from bwdesign.identify import IdentificationData, load_data
 from bwdesign.identify.excite import design_excitation
 from bwdesign.model.config import load_config
@@ -490,7 +502,13 @@ if __name__ == "__main__":  # print the table: input, exit code, error line
 EXP = dict(a1=159827.5, a2=713.8, a3=222665.02, alpha=0.4795, beta=0.3762, gamma=0.0378)
 P = preset("paper_experiment")
 SINE = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
-LOOP = dict(dt=2e-4, duration=0.01, gains=(8, 64, -512), lambda1=1.0, lambda2=2.0)
+
+
+def loop(dt=2e-4, controller=None):
+    """The PHSO on the paper's gains with eq. (12) at lambda1 = 1, lambda2 = 2 1/s."""
+    law = make_controller(P, 1.0, 2.0) if controller is None else controller
+    return ClosedLoop(P, ObserverSpec.of("phso", (8, 64, -512)), law, dt=dt)
+
 
 PYTHON = [
     ("a1 = 1e308", lambda: BoucWenParams(**{**EXP, "a1": 1e308}), ParameterError, r"\[1e-06"),
@@ -510,30 +528,52 @@ PYTHON = [
     ("dt 1", lambda: certify(P, (8, 64, -512), udot_max=361, dt=1), InputError, "too long"),
     ("synthesize dt 1", lambda: synthesize(P, udot_max=361, dt=1.0), InputError, "too long"),
     (
-        "simulate dt 1",
-        lambda: simulate(P, SINE, **{**LOOP, "dt": 1.0, "duration": 10.0}),
+        "ClosedLoop dt 1",
+        lambda: simulate(loop(dt=1.0), SINE, duration=10.0),
         InputError,
         "too long",
-    ),  # fmt: skip
-    ("seed -3", lambda: simulate(P, SINE, **LOOP, seed=-3), InputError, "seed = -3"),
-    ("seed 3.0", lambda: simulate(P, SINE, **LOOP, seed=3.0), InputError, "must be an integer"),
-    ("seed True", lambda: simulate(P, SINE, **LOOP, seed=True), InputError, "must be an integer"),
+    ),
+    ("seed -3", lambda: simulate(loop(), SINE, duration=0.01, seed=-3), InputError, "seed = -3"),
+    (
+        "seed 3.0",
+        lambda: simulate(loop(), SINE, duration=0.01, seed=3.0),
+        InputError,
+        "must be an integer",
+    ),
+    (
+        "seed True",
+        lambda: simulate(loop(), SINE, duration=0.01, seed=True),
+        InputError,
+        "must be an integer",
+    ),
     ("amplitude 1e300", lambda: Sine(amplitude=1e300, frequency=1.0), ConfigError, "range"),
+    (
+        "ClosedLoop controller for another dt",
+        lambda: loop(controller=make_controller(P, 1.0, 2.0, form="discrete", dt=1e-4)),
+        InputError,
+        r"built for dt = 0.0001 s, not 0.0002 s",
+    ),
+    (
+        "ObserverSpec gains str",
+        lambda: ObserverSpec.of("phso", ("8", 64, -512)),
+        GainError,
+        "must be a number",
+    ),
+    ("Start u_prev inf", lambda: Start(u_prev=np.inf), InputError, "u_prev must be finite"),
     ("gains str", lambda: certify(P, ("8", 64, -512), udot_max=361), ValueError, "numbers"),
     (
         "simulate above Nyquist",
-        lambda: simulate(P, Sine(amplitude=1.0, frequency=3000.0), **LOOP),
+        lambda: simulate(loop(), Sine(amplitude=1.0, frequency=3000.0), duration=0.01),
         InputError,
         r"Nyquist frequency 1/\(2 dt\) = 2500 Hz",
     ),
     (
         "simulate_batch above Nyquist",
         lambda: simulate_batch(
-            P,
+            loop(controller=TrackingController(P, 1.0, 2.0)),
             Sine(amplitude=1.0, frequency=2500.0),
             [P],
-            controller=TrackingController(P, 1.0, 2.0),
-            **{k: v for k, v in LOOP.items() if k not in ("lambda1", "lambda2")},
+            duration=0.01,
         ),
         InputError,
         "at or above the Nyquist frequency",

@@ -146,14 +146,26 @@ def test_non_finite_state_is_refused_identically(make):
 
 
 @pytest.mark.parametrize(
-    "kw", [dict(u_prev="1.0"), dict(u_prev=True), dict(duration="0.2"), dict(noise_std=None)]
+    "start, kw",
+    [
+        (dict(u_prev="1.0"), {}),
+        (dict(u_prev=True), {}),
+        ({}, dict(duration="0.2")),
+        ({}, dict(noise_std=None)),
+    ],
 )
-def test_simulate_refuses_strings_and_booleans(kw):
-    from bwdesign import Sine, simulate
+def test_simulate_refuses_strings_and_booleans(start, kw):
+    from bwdesign import ClosedLoop, ObserverSpec, Sine, Start, make_controller, simulate
 
-    args = dict(dt=2e-4, duration=0.2, gains=G, lambda1=1.0, lambda2=2.0)
     with pytest.raises(InputError, match="must be a number"):
-        simulate(P, Sine(amplitude=10, offset=10, frequency=5), **{**args, **kw})
+        loop = ClosedLoop(
+            P,
+            ObserverSpec.of("phso", G),
+            make_controller(P, 1.0, 2.0),
+            dt=2e-4,
+            start=Start(**start),
+        )
+        simulate(loop, Sine(amplitude=10, offset=10, frequency=5), **{"duration": 0.2, **kw})
 
 
 def test_ukf_interface_matches_or_says_what_differs():

@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 
 from bwdesign import (
+    ClosedLoop,
     DiscreteTrackingController,
     DisturbanceHysteresisObserver,
     ExtendedStateObserver,
     HysteresisObserver,
+    ObserverSpec,
     TrackingController,
     load_config,
     simulate,
@@ -164,14 +166,16 @@ def test_closed_loop_with_phdo_matches_python(builds, config, precision, tol):
     """
     p, dt, c = config.plant, config.dt, config.controller
     ref_traj = Triangle(amplitude=60.0, offset=100.0, frequency=2.0)
-    res = simulate(
+    loop = ClosedLoop(
         p,
-        ref_traj,
+        ObserverSpec("phdo", disturbance_gains_from(config.gains)),
+        DiscreteTrackingController(p, c.lambda1, c.lambda2, dt=dt),
         dt=dt,
+    )
+    res = simulate(
+        loop,
+        ref_traj,
         duration=N * dt,
-        observer="phdo",
-        gains=disturbance_gains_from(config.gains),
-        controller=DiscreteTrackingController(p, c.lambda1, c.lambda2, dt=dt),
         true_params=replace(p, a1=1.02 * p.a1, a3=0.98 * p.a3),
         noise_std=0.01,
         seed=5,

@@ -12,9 +12,12 @@ import pytest
 from filterpy.common import Saver
 
 from bwdesign import (
+    ClosedLoop,
     DisturbanceHysteresisObserver,
     HysteresisObserver,
+    ObserverSpec,
     Sine,
+    make_controller,
     preset,
     simulate,
     simulate_zoh,
@@ -136,24 +139,22 @@ def test_iosystem_has_four_states():
 REF = Sine(amplitude=80, offset=100, frequency=1)
 
 
+def tuned_loop(tu, observer, **kw):
+    """``observer`` on the tuning's design gains (the PHDO on ``(l1, l2, 0, l3)``), its law."""
+    law = make_controller(
+        P, tu.lambda1, tu.lambda2, form=tu.form, dt=DT, integral_rate=tu.integral_rate
+    )
+    return ClosedLoop(P, ObserverSpec.of(observer, tu.gains), law, dt=DT, **kw)
+
+
 @pytest.mark.parametrize("mismatch", [False, True])
 def test_fast_and_generic_paths_agree(mismatch):
     tu = digital_tuning(P, DT)
     tp = P.replace(a1=P.a1 * 1.02, a3=P.a3 * 0.98, gamma=P.gamma * 1.1) if mismatch else None
+    lp = tuned_loop(tu, "phdo", delay=True)
+    assert lp.observer.gains == tu.observer_gains_for("phdo")
     runs = [
-        simulate(
-            P,
-            REF,
-            dt=DT,
-            duration=1.0,
-            observer="phdo",
-            true_params=tp,
-            delay=True,
-            noise_std=0.02,
-            seed=3,
-            fast=fast,
-            **tu.controller_kwargs(observer="phdo"),
-        )
+        simulate(lp, REF, duration=1.0, true_params=tp, noise_std=0.02, seed=3, fast=fast)
         for fast in (True, False)
     ]
     assert [r.settings["path"] for r in runs] == ["fast", "generic"]
@@ -169,14 +170,16 @@ def test_tuning_gains_for_phdo():
         tu.observer_gains_for("ukf")
 
 
-def test_simulate_refuses_jump_and_wrong_gains():
+def test_loop_refuses_jump_and_wrong_gains():
+    jump = make_controller(P, 200, 200, form="discrete", dt=DT, hysteresis_jump=True)
     with pytest.raises(InputError, match="hysteresis_jump"):
-        simulate(
-            P, REF, dt=DT, duration=0.1, observer="phdo", gains=L4, lambda1=200, lambda2=200,
-            hysteresis_jump=True, form="discrete",
-        )  # fmt: skip
-    with pytest.raises(GainError, match="four numbers"):
-        simulate(P, REF, dt=DT, duration=0.1, observer="phdo", gains=L3, lambda1=1, lambda2=2)
+        ClosedLoop(P, ObserverSpec.of("phdo", L4), jump, dt=DT)
+    with pytest.raises(GainError, match="takes 4 gains"):
+        ObserverSpec("phdo", L3)  # 3 gains are a design: ObserverSpec.of maps them
+    assert ObserverSpec.of("phdo", L3).gains == L4
+    unstable = (L4[0], L4[1], 6256.75, 0.0)  # l3 + l4 > 0: not Hurwitz, and l4 = 0
+    with pytest.raises(GainError):
+        ClosedLoop(P, ObserverSpec.of("phdo", unstable), make_controller(P, 1, 2), dt=DT)
 
 
 def _cli(*args):
@@ -209,16 +212,12 @@ def _table2_row(ref, true, noise):
     out = {}
     for o in ("eso", "phso", "phdo"):
         r = simulate(
-            P,
+            tuned_loop(tu, o, delay=True),
             ref,
-            dt=DT,
             duration=3.0,
-            observer=o,
-            delay=True,
             true_params=true,
             noise_std=0.02 if noise else 0.0,
             seed=1,
-            **tu.controller_kwargs(observer=o),
         )
         assert r.stable
         out[o] = (r.metrics.me, r.metrics.rmse)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from bwdesign import InputError, load_config, preset
-from bwdesign.cli import main
+from bwdesign.cli.main import main  # in-process; the console script's leaves SIGINT ignored
 from bwdesign.identify import MIN_SAMPLES, load_data
 from bwdesign.identify.excite import (
     RANGE_MARGIN,

@@ -6,7 +6,16 @@ import math
 import numpy as np
 import pytest
 
-from bwdesign import Step, analyze_loop, mismatch_sweep, simulate
+from bwdesign import (
+    ClosedLoop,
+    ObserverSpec,
+    Start,
+    Step,
+    analyze_loop,
+    make_controller,
+    mismatch_sweep,
+    simulate,
+)
 from bwdesign.control.analysis import stability_interval
 from bwdesign.control.tuning import digital_tuning, observer_gains
 from bwdesign.errors import InputError
@@ -17,6 +26,12 @@ from bwdesign.output.jsonenc import json_safe
 DT = 2e-4
 PAPER_GAINS = (8.0, 64.0, -512.0)
 HOLD = Step(amplitude=0.0, offset=10.0)  # a constant reference: free decay of the loop
+
+
+def loop(p, observer, gains, lambda1, lambda2, *, form="continuous", jump=False, **kw):
+    """``observer`` on ``gains`` with eq. (12) in ``form``, sampled at DT."""
+    law = make_controller(p, lambda1, lambda2, form=form, dt=DT, hysteresis_jump=jump)
+    return ClosedLoop(p, ObserverSpec.of(observer, gains), law, dt=DT, **kw)
 
 
 def decay_rate(r, t0, t1):
@@ -65,18 +80,8 @@ def test_sampled_poles_match_simulated_decay(experiment):
     """The slowest pole of the analysis is the decay rate of the simulated tracking error."""
     g = tuple(observer_gains(experiment, [-1000.0] * 3))
     a = analyze_loop(experiment, 50.0, 400.0, g, dt=DT, form="discrete")
-    r = simulate(
-        experiment,
-        HOLD,
-        dt=DT,
-        duration=0.13,
-        observer="phso",
-        gains=g,
-        lambda1=50.0,
-        lambda2=400.0,
-        form="discrete",
-        xhat0=(2.0, 0.0, 0.0),
-    )
+    lp = loop(experiment, "phso", g, 50.0, 400.0, form="discrete", start=Start(xhat0=(2, 0, 0)))
+    r = simulate(lp, HOLD, duration=0.13)
     assert decay_rate(r, 0.04, 0.12) == pytest.approx(a.slowest_decay_rate, rel=0.01)
     assert a.slowest_decay_rate == pytest.approx(-math.log(a.spectral_radius) / DT, rel=1e-9)
 
@@ -88,18 +93,8 @@ def test_paper_constants_decay_matches_analysis_not_design(experiment):
     estimate only with ``hysteresis_jump=True``, and then the match is exact.
     """
     a = analyze_loop(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT)
-    r = simulate(
-        experiment,
-        HOLD,
-        dt=DT,
-        duration=20.01,
-        observer="phso",
-        gains=PAPER_GAINS,
-        lambda1=1.0,
-        lambda2=2.0,
-        xhat0=(2.0, 0.0, 0.0),
-        hysteresis_jump=True,
-    )
+    lp = loop(experiment, "phso", PAPER_GAINS, 1.0, 2.0, jump=True, start=Start(xhat0=(2, 0, 0)))
+    r = simulate(lp, HOLD, duration=20.01)
     rate = decay_rate(r, 8.0, 20.0)
     assert rate == pytest.approx(a.slowest_decay_rate, rel=0.005)
     assert rate < 0.2  # nowhere near the designed slowest pole of 1 1/s
@@ -110,17 +105,8 @@ def test_steady_state_error_matches_tracking_gain(experiment):
     from bwdesign import Sine
 
     a = analyze_loop(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT)
-    r = simulate(
-        experiment,
-        Sine(amplitude=80.0, offset=100.0, frequency=1.0),
-        dt=DT,
-        duration=70.0,
-        observer="phso",
-        gains=PAPER_GAINS,
-        lambda1=1.0,
-        lambda2=2.0,
-        x0=(100.0, 0.0, 0.0),
-    )
+    lp = loop(experiment, "phso", PAPER_GAINS, 1.0, 2.0, start=Start(x0=(100.0, 0.0, 0.0)))
+    r = simulate(lp, Sine(amplitude=80.0, offset=100.0, frequency=1.0), duration=70.0)
     amp = 0.5 * np.ptp(r.e[r.t >= 68.0])
     assert amp == pytest.approx(80.0 * abs(a.tracking_gain(1.0)), rel=0.02)
 
@@ -139,18 +125,8 @@ def test_gain_margin_matches_simulation(experiment):
     assert 1.3 < k_max < 1.6
     swings = {}
     for k in (0.95, 1.05):
-        r = simulate(
-            p,
-            HOLD,
-            dt=DT,
-            duration=2.0,
-            observer="eso",
-            gains=PAPER_GAINS,
-            lambda1=1.0,
-            lambda2=2.0,
-            true_params=p.replace(a3=p.a3 * k * k_max),
-            xhat0=(2.0, 0.0, 0.0),
-        )
+        lp = loop(p, "eso", PAPER_GAINS, 1.0, 2.0, start=Start(xhat0=(2.0, 0.0, 0.0)))
+        r = simulate(lp, HOLD, duration=2.0, true_params=p.replace(a3=p.a3 * k * k_max))
         v = r.x[:, 1]  # the oscillatory mode shows in the velocity
         swings[k] = np.max(np.abs(v[r.t > 1.5])) / np.max(np.abs(v[(r.t > 0.2) & (r.t < 0.7)]))
     assert swings[0.95] < 0.5 and swings[1.05] > 2.0
@@ -262,9 +238,8 @@ def test_digital_tuning_lightly_damped_stages(config):
     # the observer must be faster than the lightly damped resonance
     assert t.observer_bandwidth > math.sqrt(c.plant.a1)
     period = 1.0 / c.reference.frequency
-    r = simulate(
-        c.plant, c.reference, dt=c.dt, duration=3 * period, delay=True, **t.controller_kwargs()
-    )
+    lp = ClosedLoop.from_config(c, law=t, start=Start(), saturate=False).replace(delay=True)
+    r = simulate(lp, c.reference, duration=3 * period)
     assert r.stable and r.status == "ok"
     amp = c.reference.amplitude
     assert np.max(np.abs(r.e[r.t > period])) < 0.01 * amp

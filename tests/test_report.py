@@ -295,7 +295,7 @@ def test_batch_estimation_maxe_is_the_scalar_runs_max_error():
     """The robust table's simulated column: simulate_batch's steady-state max |xhat - x|."""
     import numpy as np
 
-    from bwdesign import preset, simulate
+    from bwdesign import ClosedLoop, ObserverSpec, preset, simulate
     from bwdesign.control.controllers import make_controller
     from bwdesign.model.references import Sine
     from bwdesign.sim.batch import simulate_batch
@@ -304,12 +304,12 @@ def test_batch_estimation_maxe_is_the_scalar_runs_max_error():
     corners = [p.replace(a1=1.02 * p.a1, alpha=0.9 * p.alpha), p.replace(a3=0.98 * p.a3)]
     ref = Sine(amplitude=80.0, offset=100.0, frequency=5.0)
     ctrl = make_controller(p, 250.0, 250.0, form="discrete", dt=2e-4, integral_rate=125.0)
-    kw = dict(dt=2e-4, duration=0.6, controller=ctrl, gains=(786.2, 28982.94, -782.09))
-    batch = simulate_batch(p, ref, corners, noise_std=0.05, seeds=[3, 4], **kw)
+    loop = ClosedLoop(p, ObserverSpec.of("phso", (786.2, 28982.94, -782.09)), ctrl, dt=2e-4)
+    batch = simulate_batch(loop, ref, corners, duration=0.6, noise_std=0.05, seeds=[3, 4])
     assert batch.estimation_maxe.shape == (2, 3)
     assert np.all(batch.estimation_maxe >= batch.estimation_rmse)
     for i, tp in enumerate(corners):
-        r = simulate(p, ref, true_params=tp, noise_std=0.05, seed=[3, 4][i], **kw)
+        r = simulate(loop, ref, duration=0.6, true_params=tp, noise_std=0.05, seed=[3, 4][i])
         t = np.asarray(r.t)
         sel = (t >= batch.window[0] - 1e-12) & (t <= batch.window[1] + 1e-12)
         err = np.abs(np.asarray(r.xhat) - np.asarray(r.x))[sel].max(axis=0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bwdesign import Sine, UncertaintyBox, certify_robust, preset
+from bwdesign import ClosedLoop, ObserverSpec, Sine, Start, UncertaintyBox, certify_robust, preset
 from bwdesign.control.controllers import make_controller
 from bwdesign.sim.batch import simulate_batch
 
@@ -26,20 +26,15 @@ def _worst_simulated(params, box, *, noise_std=0.0, duration=3.0):
     ctrl = make_controller(params, form="discrete", dt=DT, **LOOP)
     xd, vd, ad = (float(v[0]) for v in REF.evaluate(np.array([0.0])))
     u0 = float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad]))
+    start = Start(x0=(xd, vd, 0.0), xhat0=(xd, vd, 0.0), u_prev=u0)
+    loop = ClosedLoop(params, ObserverSpec.of("phso", GAINS), ctrl, dt=DT, delay=True, start=start)
     res = simulate_batch(
-        params,
+        loop,
         REF,
         box.vertices(params),
-        dt=DT,
         duration=duration,
-        controller=ctrl,
-        gains=GAINS,
-        delay=True,
         noise_std=noise_std,
         seeds=np.arange(2 ** len(box.widths)),
-        x0=[xd, vd, 0.0],
-        xhat0=[xd, vd, 0.0],
-        u_prev=u0,
     )
     assert res.stable.all()
     return float(np.max(res.maxe)), np.max(res.estimation_rmse, axis=0)
@@ -153,7 +148,6 @@ def test_report_has_the_robust_section(tmp_path):
     from bwdesign import load_config, simulate
     from bwdesign.control.tuning import digital_tuning
     from bwdesign.report.certified import build_report
-    from bwdesign.sim.start import start_on_reference
 
     config = load_config("stack_actuator_800hz")
     doc, cert, _, _ = build_report(config, tmp_path, quiet=True)
@@ -171,7 +165,6 @@ def test_report_has_the_robust_section(tmp_path):
         dt=dt,
         integral_rate=tuning.integral_rate,
     )
-    start = start_on_reference(p, ref)
     corners = box.vertices(p)
     duration = max(3 * ref.period, 0.5)
     for obs in ("phso", "phdo"):
@@ -190,19 +183,17 @@ def test_report_has_the_robust_section(tmp_path):
         assert rob["conservatism"] >= 1
         # recompute the simulated column: the batch at every corner, then the scalar
         # simulate() at the worst corners, whose full records give the max |error| directly
-        gains = tuning.observer_gains_for(obs)
-        batch = simulate_batch(
-            p, ref, corners, dt=dt, duration=duration, controller=ctrl, gains=gains,
-            observer=obs, delay=tuning.delay, **start,
+        loop = ClosedLoop(
+            p, ObserverSpec.of(obs, tuning.gains), ctrl, dt=dt, delay=tuning.delay,
+            start=Start.on_reference(p, ref),
         )  # fmt: skip
+        assert loop.observer.gains == tuning.observer_gains_for(obs)
+        batch = simulate_batch(loop, ref, corners, duration=duration)
         assert rob["simulated_window"] == list(batch.window)
         assert rob["simulated_input_rate_max"] == pytest.approx(np.max(batch.input_rate_max))
         for col, want in ((None, rob["simulated_worst_maxe"]), (0, est[0]), (2, est[2])):
             worst = int(np.argmax(batch.maxe if col is None else batch.estimation_maxe[:, col]))
-            r = simulate(
-                p, ref, dt=dt, duration=duration, controller=ctrl, gains=gains, observer=obs,
-                delay=tuning.delay, true_params=corners[worst], **start,
-            )  # fmt: skip
+            r = simulate(loop, ref, duration=duration, true_params=corners[worst])
             t = np.asarray(r.t)
             sel = (t >= batch.window[0] - 1e-12) & (t <= batch.window[1] + 1e-12)
             if col is None:

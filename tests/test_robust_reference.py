@@ -14,13 +14,22 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from bwdesign import Sine, Step, Triangle, UncertaintyBox, certify_robust, preset
+from bwdesign import (
+    ClosedLoop,
+    ObserverSpec,
+    Sine,
+    Start,
+    Step,
+    Triangle,
+    UncertaintyBox,
+    certify_robust,
+    preset,
+)
 from bwdesign.control.controllers import make_controller
 from bwdesign.errors import InputError
 from bwdesign.model.reference_cover import SIGMA, sup_abs
 from bwdesign.model.references import Reference
 from bwdesign.sim.batch import simulate_batch
-from bwdesign.sim.start import start_on_reference
 
 
 @dataclass(frozen=True)
@@ -179,21 +188,9 @@ def _certify(params, box, ref, **kw):
 
 def _corners(params, box, ref, duration):
     ctrl = make_controller(params, form="discrete", dt=DT, **LOOP)
-    start = start_on_reference(params, ref)
-    res = simulate_batch(
-        params,
-        ref,
-        box.vertices(params),
-        dt=DT,
-        duration=duration,
-        controller=ctrl,
-        gains=GAINS,
-        delay=True,
-        x0=start["x0"],
-        xhat0=start["xhat0"],
-        u_prev=start["u_prev"],
-        window=(0.5, duration),
-    )
+    start = Start.on_reference(params, ref)
+    loop = ClosedLoop(params, ObserverSpec.of("phso", GAINS), ctrl, dt=DT, delay=True, start=start)
+    res = simulate_batch(loop, ref, box.vertices(params), duration=duration, window=(0.5, duration))
     assert res.stable.all()
     return res
 
@@ -228,6 +225,7 @@ def test_the_reports_loop_on_the_stack_stage_with_a_late_step(observer):
     delay), the stage's own 64-corner box, a 0 -> 15 um step at 3 s with a 0.5 s rise,
     the envelope by the stage's rule. Before: x3 bound 0.0898 (PHDO) / 0.0702 (PHSO)
     against 0.675 simulated after the step."""
+    from bwdesign.control.loop import ON_REFERENCE
     from bwdesign.control.tuning import digital_tuning
     from bwdesign.model.config import load_config
     from bwdesign.model.envelope import derive_envelope
@@ -239,10 +237,14 @@ def test_the_reports_loop_on_the_stack_stage_with_a_late_step(observer):
     tun = digital_tuning(p, dt)
     gains = tun.observer_gains_for(observer)
     loop = {"lambda1": tun.lambda1, "lambda2": tun.lambda2, "integral_rate": tun.integral_rate}
+    ctrl = make_controller(p, form="discrete", dt=dt, **loop)
+    spec = ObserverSpec.of(observer, tun.gains)
+    assert spec.gains == gains
     sim = simulate_corners(
-        p, box, ref, dt=dt, gains=gains, delay=tun.delay, observer=observer, **loop
+        ClosedLoop(p, spec, ctrl, dt=dt, delay=tun.delay, start=ON_REFERENCE), box, ref
     )
-    assert sim.window[0] < ref.t_step < ref.settles_at < sim.window[1]
+    # the statistics from the step's first move on (to 1 s after it has settled)
+    assert sim.window[0] <= ref.t_step < ref.settles_at < sim.window[1]
     env = derive_envelope(p, ref, margin=1.1).udot_max
     assert np.max(sim.input_rate_max) <= env
     rc = certify_robust(

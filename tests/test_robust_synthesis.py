@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from bwdesign import Sine, UncertaintyBox, preset
+from bwdesign import ClosedLoop, ObserverSpec, Sine, Start, UncertaintyBox, preset
 from bwdesign.control.controllers import make_controller
 from bwdesign.control.tuning import digital_tuning
 from bwdesign.errors import InputError, ParameterError
@@ -19,6 +19,13 @@ from bwdesign.sim.robust_design import synthesize_robust
 DT = 2e-4
 REF = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
 UDOT = 80 * 2 * np.pi * 1.1
+
+
+def _start(ctrl):
+    """On the reference at t = 0, holding the law's feedforward input."""
+    xd, vd, ad = (float(v[0]) for v in REF.evaluate(np.array([0.0])))
+    u0 = float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad]))
+    return Start(x0=(xd, vd, 0.0), xhat0=(xd, vd, 0.0), u_prev=u0)
 
 
 def _custom():
@@ -64,21 +71,9 @@ def _worst_corner(params, box, design):
         dt=DT,
         integral_rate=design.integral_rate,
     )
-    xd, vd, ad = (float(v[0]) for v in REF.evaluate(np.array([0.0])))
-    res = simulate_batch(
-        params,
-        REF,
-        box.vertices(params),
-        dt=DT,
-        duration=3.0,
-        controller=ctrl,
-        gains=design.gains,
-        observer=design.observer,
-        delay=design.delay,
-        x0=[xd, vd, 0.0],
-        xhat0=[xd, vd, 0.0],
-        u_prev=float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad])),
-    )
+    spec = ObserverSpec.of(design.observer, design.gains)
+    loop = ClosedLoop(params, spec, ctrl, dt=DT, delay=design.delay, start=_start(ctrl))
+    res = simulate_batch(loop, REF, box.vertices(params), duration=3.0)
     assert res.stable.all()
     return float(np.max(res.maxe))
 
@@ -237,22 +232,11 @@ def test_phdo_robust_loop_covers_brute_force_corners_on_a_custom_stage():
     )
     assert rc.holds, rc.status
     ctrl = make_controller(p, form="discrete", dt=DT, **loop)
-    xd, vd, ad = (float(v[0]) for v in REF.evaluate(np.array([0.0])))
     rng = np.random.default_rng(3)
     plants = box.vertices(p) + box.sample(p, rng, 4)
+    spec = ObserverSpec("phdo", gains)
     res = simulate_batch(
-        p,
-        REF,
-        plants,
-        dt=DT,
-        duration=3.0,
-        controller=ctrl,
-        gains=gains,
-        observer="phdo",
-        delay=True,
-        x0=[xd, vd, 0.0],
-        xhat0=[xd, vd, 0.0],
-        u_prev=float(ctrl.linear_gains()[1] @ np.array([xd, vd, ad])),
+        ClosedLoop(p, spec, ctrl, dt=DT, delay=True, start=_start(ctrl)), REF, plants, duration=3.0
     )
     assert res.stable.all()
     assert rc.tracking_bound >= float(np.max(res.maxe))

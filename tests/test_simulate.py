@@ -8,11 +8,16 @@ import numpy as np
 import pytest
 
 from bwdesign import (
+    ClosedLoop,
+    ContinuousSolver,
     DiscreteTrackingController,
     HysteresisObserver,
+    ObserverSpec,
     Sine,
+    Start,
     Step,
     Triangle,
+    make_controller,
     simulate,
     simulate_continuous,
 )
@@ -26,11 +31,21 @@ from bwdesign.sim.metrics import steady_state_window
 DT = 2e-4
 SINE = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
 FAST = (2286.2, 1208280.0, -6256.75)  # triple observer pole at 1000 rad/s on paper_experiment
-TUNED = dict(gains=FAST, lambda1=240.0, lambda2=240.0, form="discrete", integral_rate=120.0)
+
+
+def tuned(p, **kw):
+    """The tuned discrete law: lambda1 = lambda2 = 240 1/s, integral action at 120 1/s."""
+    return make_controller(p, 240.0, 240.0, form="discrete", dt=DT, integral_rate=120.0, **kw)
+
+
+def loop(p, observer="phso", *, gains=FAST, controller=None, **kw):
+    """``observer`` on ``gains`` (none for the UKF) with ``controller`` (default :func:`tuned`)."""
+    spec = ObserverSpec.of(observer, None if observer == "ukf" else gains)
+    return ClosedLoop(p, spec, tuned(p) if controller is None else controller, dt=DT, **kw)
 
 
 def test_tracking_error_decays(experiment):
-    r = simulate(experiment, SINE, dt=DT, duration=2.0, observer="phso", **TUNED)
+    r = simulate(loop(experiment), SINE, duration=2.0)
     assert r.stable and r.status == "ok"
     assert abs(r.e[0]) == pytest.approx(100.0)  # starts at rest at 0, reference at 100
     assert r.metrics.maxe < 0.05 and r.metrics.me < 0.01
@@ -40,10 +55,7 @@ def test_tracking_error_decays(experiment):
 
 
 def test_phso_beats_eso_nominal(experiment):
-    res = {
-        o: simulate(experiment, SINE, dt=DT, duration=3.0, observer=o, **TUNED)
-        for o in ("phso", "eso")
-    }
+    res = {o: simulate(loop(experiment, o), SINE, duration=3.0) for o in ("phso", "eso")}
     assert res["phso"].metrics.me < res["eso"].metrics.me
     assert res["phso"].metrics.rmse < res["eso"].metrics.rmse
     assert res["phso"].estimation_rmse[2] < res["eso"].estimation_rmse[2]
@@ -52,23 +64,17 @@ def test_phso_beats_eso_nominal(experiment):
 def test_fast_path_equals_generic_path(experiment):
     """The scalar-inlined runner and the object runner give the same record."""
     tp = experiment.replace(a1=experiment.a1 * 1.01)
+    ctrl = tuned(
+        experiment,
+        u_limits=(-30.0, 150.0),
+        estimate_limits=((-50.0, 250.0), None, (-5.0, 5.0)),
+    )
     for obs in ("phso", "eso"):
         for delay, comp in ((False, True), (True, True), (True, False)):
-            kw = dict(
-                dt=DT,
-                duration=0.3,
-                observer=obs,
-                noise_std=0.02,
-                seed=4,
-                delay=delay,
-                compensate_delay=comp,
-                true_params=tp,
-                u_limits=(-30.0, 150.0),
-                estimate_limits=((-50.0, 250.0), None, (-5.0, 5.0)),
-                **TUNED,
-            )
-            a = simulate(experiment, SINE, fast=True, **kw)
-            b = simulate(experiment, SINE, fast=False, **kw)
+            lp = loop(experiment, obs, controller=ctrl, delay=delay, compensate_delay=comp)
+            kw = dict(duration=0.3, noise_std=0.02, seed=4, true_params=tp)
+            a = simulate(lp, SINE, fast=True, **kw)
+            b = simulate(lp, SINE, fast=False, **kw)
             assert a.settings["path"] == "fast" and b.settings["path"] == "generic"
             np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-9)
             np.testing.assert_allclose(a.u, b.u, rtol=0, atol=1e-9)
@@ -76,17 +82,17 @@ def test_fast_path_equals_generic_path(experiment):
 
 
 def test_hysteresis_jump_fast_equals_generic(experiment):
-    kw = dict(dt=DT, duration=0.2, observer="phso", hysteresis_jump=True, **TUNED)
-    a = simulate(experiment, SINE, **kw)
-    b = simulate(experiment, SINE, fast=False, **kw)
+    lp = loop(experiment, controller=tuned(experiment, hysteresis_jump=True))
+    a = simulate(lp, SINE, duration=0.2)
+    b = simulate(lp, SINE, duration=0.2, fast=False)
     np.testing.assert_allclose(a.u, b.u, atol=1e-9)
 
 
 def test_noise_is_seeded(experiment):
-    kw = dict(dt=DT, duration=0.2, observer="eso", noise_std=0.02, **TUNED)
-    a = simulate(experiment, SINE, seed=7, **kw)
-    b = simulate(experiment, SINE, seed=7, **kw)
-    c = simulate(experiment, SINE, seed=8, **kw)
+    lp, kw = loop(experiment, "eso"), dict(duration=0.2, noise_std=0.02)
+    a = simulate(lp, SINE, seed=7, **kw)
+    b = simulate(lp, SINE, seed=7, **kw)
+    c = simulate(lp, SINE, seed=8, **kw)
     np.testing.assert_array_equal(a.z, b.z)
     assert not np.array_equal(a.z, c.z)
     assert np.std(a.z - a.x[:, 0]) == pytest.approx(0.02, rel=0.1)
@@ -94,16 +100,12 @@ def test_noise_is_seeded(experiment):
 
 def test_divergence_is_reported_not_raised(experiment):
     """Eq. (12) with the Section 4.2 lambda1 = 2.2e6 sampled at 0.2 ms blows up."""
-    r = simulate(
+    lp = loop(
         experiment,
-        SINE,
-        dt=DT,
-        duration=1.0,
-        observer="phso",
         gains=(8.0, 64.0, -512.0),
-        lambda1=2.2e6,
-        lambda2=80.0,
+        controller=make_controller(experiment, 2.2e6, 80.0),
     )
+    r = simulate(lp, SINE, duration=1.0)
     assert not r.stable and r.metrics is None and r.estimation_rmse is None
     assert r.status.startswith("diverged at t = ")
     assert r.t.size < 5000 and np.all(np.isfinite(r.x))
@@ -114,13 +116,9 @@ def test_divergence_is_reported_not_raised(experiment):
 
 def test_input_limits_hold_and_drive_the_observer(experiment):
     r = simulate(
-        experiment,
+        loop(experiment, controller=tuned(experiment, u_limits=(-30.0, 60.0))),
         Step(amplitude=100.0, offset=20.0, t_step=0.02),
-        dt=DT,
         duration=0.1,
-        observer="phso",
-        u_limits=(-30.0, 60.0),
-        **TUNED,
     )
     assert r.u.max() <= 60.0 and r.u.min() >= -30.0
     assert r.saturated_fraction > 0
@@ -131,44 +129,36 @@ def test_input_limits_hold_and_drive_the_observer(experiment):
 def test_smoothed_step_removes_the_input_peak(experiment):
     """The peaking remedy: a quintic rise instead of a sharp step."""
     g = tuple(observer_gains(experiment, [-5000.0] * 3))
-    kw = dict(dt=DT, duration=0.15, observer="eso", gains=g, lambda1=1000.0, lambda2=1000.0,
-              form="discrete", x0=(20.0, 0.0, 0.0), xhat0=(20.0, 0.0, 0.0),
-              u_prev=20.0 * experiment.a1 / experiment.a3)  # fmt: skip
-    sharp = simulate(experiment, Step(amplitude=100.0, offset=20.0, t_step=0.05), **kw)
+    start = Start(x0=(20.0, 0.0, 0.0), xhat0=(20.0, 0.0, 0.0),
+                  u_prev=20.0 * experiment.a1 / experiment.a3)  # fmt: skip
+    ctrl = make_controller(experiment, 1000.0, 1000.0, form="discrete", dt=DT)
+    lp = loop(experiment, "eso", gains=g, controller=ctrl, start=start)
+    sharp = simulate(lp, Step(amplitude=100.0, offset=20.0, t_step=0.05), duration=0.15)
     smooth = simulate(
-        experiment, Step(amplitude=100.0, offset=20.0, t_step=0.05, rise_time=0.01), **kw
+        lp, Step(amplitude=100.0, offset=20.0, t_step=0.05, rise_time=0.01), duration=0.15
     )
     assert sharp.u.max() > 400.0 and smooth.u.max() < 150.0
     assert sharp.stable and smooth.stable
 
 
 def test_delay_option_runs_and_costs_little(experiment):
-    a = simulate(experiment, SINE, dt=DT, duration=2.0, observer="phso", **TUNED)
-    b = simulate(experiment, SINE, dt=DT, duration=2.0, observer="phso", delay=True, **TUNED)
-    c = simulate(
-        experiment,
-        SINE,
-        dt=DT,
-        duration=2.0,
-        observer="phso",
-        delay=True,
-        compensate_delay=False,
-        **TUNED,
-    )
+    a = simulate(loop(experiment), SINE, duration=2.0)
+    b = simulate(loop(experiment, delay=True), SINE, duration=2.0)
+    c = simulate(loop(experiment, delay=True, compensate_delay=False), SINE, duration=2.0)
     assert a.stable and b.stable and c.stable
     assert b.metrics.me < 0.05 and c.metrics.me > b.metrics.me
 
 
 def test_mismatch_is_used(experiment):
     tp = experiment.replace(a3=experiment.a3 * 0.98)
-    a = simulate(experiment, SINE, dt=DT, duration=2.0, observer="eso", **TUNED)
-    b = simulate(experiment, SINE, dt=DT, duration=2.0, observer="eso", true_params=tp, **TUNED)
+    a = simulate(loop(experiment, "eso"), SINE, duration=2.0)
+    b = simulate(loop(experiment, "eso"), SINE, duration=2.0, true_params=tp)
     assert b.metrics.me > a.metrics.me
     assert b.settings["true_plant"]["a3"] == tp.a3
 
 
 def test_result_is_frozen_and_serialisable(experiment):
-    r = simulate(experiment, SINE, dt=DT, duration=0.1, observer="eso", **TUNED)
+    r = simulate(loop(experiment, "eso"), SINE, duration=0.1)
     with pytest.raises(dataclasses.FrozenInstanceError):
         r.stable = False
     with pytest.raises(ValueError):
@@ -181,7 +171,7 @@ def test_result_is_frozen_and_serialisable(experiment):
 
 
 def test_plot(experiment):
-    r = simulate(experiment, SINE, dt=DT, duration=0.1, observer="eso", **TUNED)
+    r = simulate(loop(experiment, "eso"), SINE, duration=0.1)
     fig, axes = r.plot(title="t")
     assert axes.shape == (4, 1) and fig.axes
 
@@ -189,48 +179,41 @@ def test_plot(experiment):
 def test_observer_object_and_factory(experiment):
     obs = HysteresisObserver(experiment, FAST, DT)
     x_before = obs.x.copy()
-    a = simulate(experiment, SINE, dt=DT, duration=0.2, observer=obs, **TUNED)
+    custom = loop(experiment).replace(observer=ObserverSpec.from_custom(obs))
+    a = simulate(custom, SINE, duration=0.2)
     np.testing.assert_array_equal(obs.x, x_before)  # the caller's object is not advanced
-    b = simulate(experiment, SINE, dt=DT, duration=0.2, observer="phso", **TUNED)
+    assert a.settings["path"] == "generic"  # a custom observer runs its own methods
+    b = simulate(loop(experiment), SINE, duration=0.2)
     np.testing.assert_allclose(a.x, b.x, atol=1e-9)
-    c = simulate(
-        experiment,
-        SINE,
-        dt=DT,
-        duration=0.2,
-        observer=lambda p, dt: HysteresisObserver(p, FAST, dt),
-        **{k: v for k, v in TUNED.items() if k != "gains"},
-    )
+    factory = ObserverSpec.from_custom(lambda p, dt: HysteresisObserver(p, FAST, dt))
+    c = simulate(loop(experiment).replace(observer=factory), SINE, duration=0.2)
     np.testing.assert_allclose(c.x, b.x, atol=1e-9)
 
 
 def test_ukf_plugs_in(experiment):
-    r = simulate(
-        experiment,
-        SINE,
-        dt=DT,
-        duration=0.15,
-        observer="ukf",
-        noise_std=0.02,
-        **{k: v for k, v in TUNED.items() if k != "gains"},
-    )
+    r = simulate(loop(experiment, "ukf"), SINE, duration=0.15, noise_std=0.02)
     assert r.stable and r.settings["observer"] == "ukf"
 
 
 def test_controller_object_is_not_mutated(experiment):
     c = DiscreteTrackingController(experiment, 240.0, 240.0, dt=DT, integral_rate=120.0)
-    a = simulate(experiment, SINE, dt=DT, duration=0.2, observer="phso", gains=FAST, controller=c)
+    a = simulate(loop(experiment, controller=c), SINE, duration=0.2)
     assert c.q == 0.0
-    b = simulate(experiment, SINE, dt=DT, duration=0.2, observer="phso", gains=FAST, controller=c)
+    b = simulate(loop(experiment, controller=c), SINE, duration=0.2)
     np.testing.assert_array_equal(a.u, b.u)
+
+
+def continuous_loop(p, observer, **kw):
+    """``observer`` on FAST with eq. (12) at lambda1 = lambda2 = 200 1/s, continuous form."""
+    return ClosedLoop(p, ObserverSpec.of(observer, FAST), make_controller(p, 200.0, 200.0), **kw)
 
 
 def test_continuous_path_matches_fine_sampling(experiment):
     """The continuous loop and the sampled loop at a 20x finer step agree (ESO)."""
     ref = Sine(amplitude=20.0, offset=30.0, frequency=5.0)
-    kw = dict(gains=FAST, lambda1=200.0, lambda2=200.0)
-    c = simulate_continuous(experiment, ref, duration=0.5, observer="eso", output_dt=1e-4, **kw)
-    s = simulate(experiment, ref, dt=1e-5, duration=0.5, observer="eso", **kw)
+    lp = continuous_loop(experiment, "eso")
+    c = simulate_continuous(lp, ref, duration=0.5, solver=ContinuousSolver(output_dt=1e-4))
+    s = simulate(lp.replace(dt=1e-5), ref, duration=0.5)
     assert c.stable and c.mode == "continuous"
     assert c.metrics.me == pytest.approx(s.metrics.me, rel=0.1)
     assert c.metrics.maxe == pytest.approx(s.metrics.maxe, rel=0.1)
@@ -239,14 +222,10 @@ def test_continuous_path_matches_fine_sampling(experiment):
 def test_continuous_phso_is_exact(experiment):
     ref = Triangle(amplitude=20.0, offset=30.0, frequency=5.0)
     r = simulate_continuous(
-        experiment,
+        continuous_loop(experiment, "phso"),
         ref,
         duration=0.5,
-        observer="phso",
-        gains=FAST,
-        lambda1=200.0,
-        lambda2=200.0,
-        output_dt=1e-4,
+        solver=ContinuousSolver(output_dt=1e-4),
     )
     assert r.stable and r.settings["udot"] == "implicit"
     assert r.estimation_rmse[2] < 1e-9  # same model, same u': no estimation error
@@ -273,44 +252,97 @@ def test_implicit_udot_relation(experiment):
 def test_continuous_rejects_unbounded(simulation):
     from bwdesign import preset
 
-    with pytest.raises(UnboundedModelError):
+    unbounded = preset("paper_simulation")
+    spec, law = ObserverSpec.of("phso", (80, 160, -640)), make_controller(simulation, 1.0, 2.0)
+    with pytest.raises(UnboundedModelError):  # as the loop's model
+        ClosedLoop(unbounded, spec, make_controller(unbounded, 1.0, 2.0))
+    with pytest.raises(UnboundedModelError):  # as the simulated plant
         simulate_continuous(
-            preset("paper_simulation"),
-            SINE,
-            duration=0.1,
-            gains=(80, 160, -640),
-            lambda1=1.0,
-            lambda2=2.0,
+            ClosedLoop(simulation, spec, law), SINE, duration=0.1, true_params=unbounded
         )
 
 
-BAD = [
-    ("short run", dict(duration=DT), InputError, "fewer than 2 samples"),
-    ("negative noise", dict(noise_std=-1.0), InputError, "noise_std"),
-    ("float seed", dict(seed=1.5), InputError, "seed must be an integer"),
-    ("unknown observer", dict(observer="kalman"), InputError, "observer must be"),
-    ("missing gains", dict(gains=None), InputError, "needs observer gains"),
-    ("unstable gains", dict(gains=(8.0, 64.0, 512.0)), GainError, "l3"),
-    ("no lambdas", dict(lambda1=None), InputError, "lambda1 and lambda2"),
-    ("negative lambda", dict(lambda1=-1.0), GainError, "lambda1"),
-    ("jump with ESO", dict(observer="eso", hysteresis_jump=True), InputError, "PHSO"),
-    ("bad x0", dict(x0=(1.0, 2.0)), InputError, "x0"),
-    ("bad dt", dict(dt=0.0), InputError, "dt"),
-    ("bad limits", dict(u_limits=(5.0, 1.0)), InputError, "u_min < u_max"),
+def test_continuous_refuses_what_it_does_not_run(experiment):
+    """The continuous loop runs the PHSO or the ESO with eq. (12) in continuous form."""
+    lp = continuous_loop(experiment, "eso")
+    for bad, match in [
+        (lp.replace(observer=ObserverSpec.of("phdo", FAST)), "'phso' or 'eso'"),
+        (lp.replace(controller=make_controller(experiment, 200.0, 200.0, form="discrete",
+                                               dt=DT), dt=DT), "continuous form"),
+    ]:  # fmt: skip
+        with pytest.raises(InputError, match=match):
+            simulate_continuous(bad, SINE, duration=0.1)
+    with pytest.raises(InputError, match="solver must be a ContinuousSolver"):
+        simulate_continuous(lp, SINE, duration=0.1, solver="Radau")
+
+
+SOLVER_BAD = [
+    ("method", dict(method="RK45"), "stiff solver"),
+    ("rtol", dict(rtol=0.0), "rtol"),
+    ("atol", dict(atol=-1.0), "atol"),
+    ("max_step", dict(max_step=0.0), "max_step"),
+    ("amplifier_bandwidth", dict(amplifier_bandwidth=-5.0), "amplifier_bandwidth"),
 ]
 
 
-@pytest.mark.parametrize("label, kw, err, match", BAD, ids=[b[0] for b in BAD])
-def test_bad_inputs(experiment, label, kw, err, match):
-    args = dict(dt=DT, duration=0.1, observer="phso", gains=FAST, lambda1=200.0, lambda2=200.0)
-    args.update(kw)
+@pytest.mark.parametrize("label, kw, match", SOLVER_BAD, ids=[b[0] for b in SOLVER_BAD])
+def test_continuous_solver_refuses(label, kw, match):
+    with pytest.raises(InputError, match=match):
+        ContinuousSolver(**kw)
+
+
+def _spec(kind="phso", gains=FAST):
+    return ObserverSpec.of(kind, gains)
+
+
+#: One row per check of a loop and a run: the old keyword API's checks, now on the
+#: types that hold them (ClosedLoop, ObserverSpec, Start, make_controller) or on simulate.
+BAD = [
+    ("short run", lambda p: simulate(loop(p), SINE, duration=DT), InputError,
+     "fewer than 2 samples"),
+    ("negative noise", lambda p: simulate(loop(p), SINE, duration=0.1, noise_std=-1.0),
+     InputError, "noise_std"),
+    ("float seed", lambda p: simulate(loop(p), SINE, duration=0.1, seed=1.5), InputError,
+     "seed must be an integer"),
+    ("not a loop", lambda p: simulate(p, SINE, duration=0.1), InputError,
+     "loop must be a ClosedLoop"),
+    ("unknown observer", lambda p: _spec("kalman"), InputError, "observer must be"),
+    ("missing gains", lambda p: _spec("phso", None), InputError, "needs observer gains"),
+    ("PHDO on 3 gains without .of", lambda p: ObserverSpec("phdo", FAST), GainError,
+     "takes 4 gains"),
+    ("gains for the UKF", lambda p: _spec("ukf"), InputError, "takes no gains"),
+    ("custom without predict", lambda p: ObserverSpec.from_custom(object()), InputError,
+     "predict"),
+    ("unstable gains", lambda p: loop(p, gains=(8.0, 64.0, 512.0)), GainError, "l3"),
+    ("no controller", lambda p: ClosedLoop(p, _spec(), None, dt=DT), InputError,
+     "controller must be a TrackingController"),
+    ("no lambda1", lambda p: make_controller(p, None, 200.0), GainError, "lambda1"),
+    ("negative lambda", lambda p: make_controller(p, -1.0, 200.0), GainError, "lambda1"),
+    ("controller for another dt", lambda p: loop(p).replace(dt=1e-4), InputError,
+     "built for dt = 0.0002 s"),
+    ("jump with ESO", lambda p: loop(p, "eso", controller=tuned(p, hysteresis_jump=True)),
+     InputError, "PHSO"),
+    ("bad x0", lambda p: Start(x0=(1.0, 2.0)), InputError, "x0"),
+    ("bad u_prev", lambda p: Start(u_prev=math.nan), InputError, "u_prev"),
+    ("bad start", lambda p: loop(p, start="rest"), InputError, "start must be a Start"),
+    ("bad dt", lambda p: ClosedLoop(p, _spec(), make_controller(p, 200.0, 200.0), dt=0.0),
+     InputError, "dt"),
+    ("bad divergence limit", lambda p: loop(p, divergence_limit=0.0), InputError,
+     "divergence_limit"),
+    ("bad limits", lambda p: make_controller(p, 200.0, 200.0, u_limits=(5.0, 1.0)),
+     InputError, "u_min < u_max"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("label, build, err, match", BAD, ids=[b[0] for b in BAD])
+def test_bad_inputs(experiment, label, build, err, match):
     with pytest.raises(err, match=match):
-        simulate(experiment, SINE, **args)
+        build(experiment)
 
 
 def test_bad_reference(experiment):
     with pytest.raises(InputError, match="reference"):
-        simulate(experiment, "sine", dt=DT, duration=0.1, gains=FAST, lambda1=1.0, lambda2=2.0)
+        simulate(loop(experiment), "sine", duration=0.1)
 
 
 # -- command line ------------------------------------------------------------------

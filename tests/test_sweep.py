@@ -12,8 +12,11 @@ import numpy as np
 import pytest
 
 from bwdesign import (
+    ClosedLoop,
     DiscreteTrackingController,
+    ObserverSpec,
     Sine,
+    Start,
     TrackingController,
     Triangle,
     UncertaintyBox,
@@ -23,13 +26,13 @@ from bwdesign import (
     simulate,
 )
 from bwdesign.cli.main import main
+from bwdesign.control.loop import ON_REFERENCE
 from bwdesign.errors import ConfigError, InputError, ParameterError
 from bwdesign.model.config import load_config
 from bwdesign.model.envelope import derive_envelope
 from bwdesign.report.sweep import sweep_summary
 from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
 from bwdesign.sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, replay_row
-from bwdesign.sim.start import start_on_reference
 from bwdesign.sim.sweep import (
     MEMORY_CAP,
     ROW_BYTES,
@@ -55,6 +58,11 @@ EXACT = UncertaintyBox()  # every parameter exact: the scenarios differ in noise
 @pytest.fixture(scope="module")
 def tune():
     return digital_tuning(P, DT)
+
+
+def _loop(ctl, observer, gains, **kw):
+    """``observer`` on ``gains`` (the PHDO on ``(l1, l2, 0, l3)`` of 3) with the law ``ctl``."""
+    return ClosedLoop(P, ObserverSpec.of(observer, gains), ctl, dt=DT, **kw)
 
 
 def _mismatched(n, seed):
@@ -102,33 +110,11 @@ def test_batch_matches_simulate(tune, observer, label, kw):
         P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate, u_limits=(0, 100)
     )
     seeds = cols["noise_seed"]
-    b = simulate_batch(
-        P,
-        ref,
-        tps,
-        dt=DT,
-        duration=1.0,
-        controller=ctl,
-        observer=observer,
-        gains=tune.observer_gains_for(observer),
-        noise_std=0.02,
-        seeds=seeds,
-        **kw,
-    )
+    loop = _loop(ctl, observer, tune.gains, **kw)
+    assert loop.observer.gains == tune.observer_gains_for(observer)
+    b = simulate_batch(loop, ref, tps, duration=1.0, noise_std=0.02, seeds=seeds)
     for i, tp in enumerate(tps):
-        r = simulate(
-            P,
-            ref,
-            dt=DT,
-            duration=1.0,
-            controller=ctl,
-            observer=observer,
-            gains=tune.observer_gains_for(observer),
-            true_params=tp,
-            noise_std=0.02,
-            seed=int(seeds[i]),
-            **kw,
-        )
+        r = simulate(loop, ref, duration=1.0, true_params=tp, noise_std=0.02, seed=int(seeds[i]))
         assert b.stable[i] == r.stable and b.status[i] == r.status
         m = r.metrics
         got = [b.me[i], b.maxe[i], b.rmse[i], *b.estimation_rmse[i]]
@@ -149,10 +135,10 @@ def test_the_agreement_scenarios_are_not_sensitive_to_rounding(tune):
     ctl = DiscreteTrackingController(
         P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate, u_limits=(0, 100)
     )
-    kw = dict(dt=DT, duration=1.0, controller=ctl, gains=tune.observer_gains_for("phso"))
-    kw |= dict(noise_std=0.02, seeds=cols["noise_seed"])
-    a = simulate_batch(P, ref, tps, **kw)
-    b = simulate_batch(P, ref, [replace(t, a1=t.a1 * (1 + SENSITIVITY_STEP)) for t in tps], **kw)
+    loop = _loop(ctl, "phso", tune.gains)
+    kw = dict(duration=1.0, noise_std=0.02, seeds=cols["noise_seed"])
+    a = simulate_batch(loop, ref, tps, **kw)
+    b = simulate_batch(loop, ref, [replace(t, a1=t.a1 * (1 + SENSITIVITY_STEP)) for t in tps], **kw)
     assert a.stable.all()
     for m in ("me", "maxe"):
         change = np.abs(getattr(b, m) / getattr(a, m) - 1)
@@ -165,9 +151,10 @@ def test_batch_detects_divergence_per_scenario():
     ctl = TrackingController(P, 200.0, 200.0, estimate_limits=None)
     ref = Sine(amplitude=40, offset=60, frequency=2)
     gains = (2286.2, 1208283.0, -6256.75)
-    b = simulate_batch(P, ref, tps, dt=DT, duration=0.5, controller=ctl, gains=gains)
+    loop = _loop(ctl, "phso", gains)
+    b = simulate_batch(loop, ref, tps, duration=0.5)
     for i, tp in enumerate(tps):
-        r = simulate(P, ref, dt=DT, duration=0.5, controller=ctl, gains=gains, true_params=tp)
+        r = simulate(loop, ref, duration=0.5, true_params=tp)
         assert (b.stable[i], b.status[i]) == (r.stable, r.status)
     assert not b.stable[1] and b.stable[0] and np.isnan(b.me[1])
 
@@ -194,11 +181,9 @@ def _spec(tune, observers=("phso", "eso")):
         P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
     )
     return SweepSpec(
-        params=P,
+        loop=_loop(ctl, "phso", tune.gains, start=ON_REFERENCE),
         reference=Sine(amplitude=80, offset=100, frequency=5),
-        dt=DT,
         duration=0.4,
-        controller=ctl,
         gains=tuple(tune.gains),
         observers=observers,
         noise_std=0.02,
@@ -219,11 +204,9 @@ def corner_sweep(tune):
     )
     env = derive_envelope(P, CHAOS_REF, margin=1.1).udot_max
     spec = SweepSpec(
-        params=P,
+        loop=_loop(ctl, "phso", tune.gains, start=ON_REFERENCE),
         reference=CHAOS_REF,
-        dt=DT,
         duration=1.5,
-        controller=ctl,
         gains=tuple(tune.gains),
         observers=("phso",),
         udot_max=env,
@@ -409,6 +392,8 @@ def test_limits_are_checked_before_any_work(tune, monkeypatch):
         _spec(tune, ("phso", "eso", "phso"))
     with pytest.raises(InputError, match="udot_max"):
         replace(_spec(tune), udot_max=-1.0)
+    with pytest.raises(InputError, match="loop must be a ClosedLoop"):
+        replace(_spec(tune), loop=P)
 
     def no_work(*a, **k):
         raise AssertionError("a chunk ran")
@@ -587,17 +572,20 @@ def test_sweep_runs_the_disturbance_observer(tune):
     table = run_sweep(spec, sc, chunk_size=4, workers=0)
     assert set(table["observer"]) == {"phso", "phdo"}
     tps, _ = _mismatched(4, seed=2)
-    ref = simulate_batch(
+    assert spec.loop_for("phdo").observer.gains == disturbance_gains_from(spec.gains)
+    loop = ClosedLoop(
         P,
+        ObserverSpec("phdo", disturbance_gains_from(spec.gains)),
+        spec.controller,
+        dt=DT,
+        start=Start.on_reference(P, spec.reference),
+    )
+    ref = simulate_batch(
+        loop,
         spec.reference,
         tps,
-        dt=DT,
         duration=spec.duration,
-        controller=spec.controller,
-        observer="phdo",
-        gains=disturbance_gains_from(spec.gains),
         noise_std=spec.noise_std,
         seeds=sc["noise_seed"],
-        **start_on_reference(P, spec.reference),
     )
     np.testing.assert_array_equal(table["me"][table["observer"] == "phdo"], ref.me)

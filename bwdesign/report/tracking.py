@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope, derive_envelope
-from ..control.loop import ClosedLoop
 from ..sim.closed_loop import simulate
 from ..sim.result import SimulationResult
 from .document import fmt
@@ -129,7 +129,7 @@ def tracking_runs(
         nominal plant, no noise, limits ``[controller] u_min/u_max``, starting on
         the reference (``ClosedLoop(start="reference")``).
     """
-    ref, dt = config.reference, float(config.dt)
+    ref = config.reference
     duration = 3.0 * ref.period if ref.period is not None else 1.0
     loops = {
         # the report's digital runs are simulated without the tuning's computation delay
