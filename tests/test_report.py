@@ -10,7 +10,8 @@ import pytest
 from bwdesign.cli.main import main
 from bwdesign.model.config import load_config
 from bwdesign.output.jsonenc import dump_json
-from bwdesign.report.certified import REPORT_SECTIONS, certificate_document, write_report
+from bwdesign.report.certified import write_report
+from bwdesign.study import CERTIFICATE_PARTS, REPORT_SECTIONS, study
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "paper_experiment.toml"
@@ -126,7 +127,7 @@ def _compare(new, old, path=""):
 def test_committed_certificate_json_is_current():
     """Regenerate certificate.json and compare with the committed one (tolerances above)."""
     committed = json.loads((COMMITTED / "certificate.json").read_text())
-    doc, _, _ = certificate_document(load_config(CONFIG))
+    doc = study(load_config(CONFIG), parts=CERTIFICATE_PARTS).to_dict()
     fresh = json.loads(dump_json(doc))
     _compare(fresh, committed)
 
@@ -275,7 +276,7 @@ def test_tier_search_brackets_the_feasibility_edge():
     """The search over the requested rate stops within SEARCH_RTOL of a feasibility edge."""
     from types import SimpleNamespace
 
-    from bwdesign.report.tiers import SEARCH_RTOL, _search
+    from bwdesign.study.tiers import SEARCH_RTOL, search_requested_rate
 
     for edge, start in ((1234.5, 10.0), (3.0, 10.0)):
         calls = []
@@ -284,7 +285,7 @@ def test_tier_search_brackets_the_feasibility_edge():
             calls.append(u)
             return SimpleNamespace(feasible=u <= edge)
 
-        tried = _search(run, start, start <= edge)
+        tried = search_requested_rate(run, start, start <= edge)
         ok = [u for u, res in tried if res.feasible] + ([start] if start <= edge else [])
         bad = [u for u, res in tried if not res.feasible] + ([] if start <= edge else [start])
         assert max(ok) <= edge < min(bad) <= max(ok) * (1 + SEARCH_RTOL)
@@ -295,7 +296,7 @@ def test_batch_estimation_maxe_is_the_scalar_runs_max_error():
     """The robust table's simulated column: simulate_batch's steady-state max |xhat - x|."""
     import numpy as np
 
-    from bwdesign import preset, simulate
+    from bwdesign import ClosedLoop, ObserverSpec, preset, simulate
     from bwdesign.control.controllers import make_controller
     from bwdesign.model.references import Sine
     from bwdesign.sim.batch import simulate_batch
@@ -304,12 +305,12 @@ def test_batch_estimation_maxe_is_the_scalar_runs_max_error():
     corners = [p.replace(a1=1.02 * p.a1, alpha=0.9 * p.alpha), p.replace(a3=0.98 * p.a3)]
     ref = Sine(amplitude=80.0, offset=100.0, frequency=5.0)
     ctrl = make_controller(p, 250.0, 250.0, form="discrete", dt=2e-4, integral_rate=125.0)
-    kw = dict(dt=2e-4, duration=0.6, controller=ctrl, gains=(786.2, 28982.94, -782.09))
-    batch = simulate_batch(p, ref, corners, noise_std=0.05, seeds=[3, 4], **kw)
+    loop = ClosedLoop(p, ObserverSpec.of("phso", (786.2, 28982.94, -782.09)), ctrl, dt=2e-4)
+    batch = simulate_batch(loop, ref, corners, duration=0.6, noise_std=0.05, seeds=[3, 4])
     assert batch.estimation_maxe.shape == (2, 3)
     assert np.all(batch.estimation_maxe >= batch.estimation_rmse)
     for i, tp in enumerate(corners):
-        r = simulate(p, ref, true_params=tp, noise_std=0.05, seed=[3, 4][i], **kw)
+        r = simulate(loop, ref, duration=0.6, true_params=tp, noise_std=0.05, seed=[3, 4][i])
         t = np.asarray(r.t)
         sel = (t >= batch.window[0] - 1e-12) & (t <= batch.window[1] + 1e-12)
         err = np.abs(np.asarray(r.xhat) - np.asarray(r.x))[sel].max(axis=0)
@@ -321,7 +322,7 @@ def test_tier_rows_when_synthesis_says_no(monkeypatch):
     """theorem1 below the stage's rate: gains fetched at half its envelope; no design: no gains."""
     from types import SimpleNamespace
 
-    import bwdesign.report.tiers as tiers
+    import bwdesign.study.tiers as tiers
     from bwdesign import preset
 
     calls = []

@@ -150,13 +150,13 @@ def test_paper_experiment_64_vertices():
 @pytest.mark.slow
 def test_report_has_the_robust_section(tmp_path):
     """Certified peak bounds beside the corners' steady-state max |error| (like for like)."""
-    from bwdesign import load_config, simulate
+    from bwdesign import ClosedLoop, ObserverSpec, load_config, simulate
     from bwdesign.control.tuning import digital_tuning
     from bwdesign.report.certified import build_report
-    from bwdesign.sim.start import start_on_reference
 
     config = load_config("stack_actuator_800hz")
-    doc, cert, _, _ = build_report(config, tmp_path, quiet=True)
+    doc, s = build_report(config, tmp_path, quiet=True)
+    cert = s.to_dict()
     md = doc.to_markdown()
     section = md.split("## Robust certificate")[1].split("\n## ")[0]
     assert "RMS" not in section
@@ -171,7 +171,6 @@ def test_report_has_the_robust_section(tmp_path):
         dt=dt,
         integral_rate=tuning.integral_rate,
     )
-    start = start_on_reference(p, ref)
     corners = box.vertices(p)
     duration = max(3 * ref.period, 0.5)
     for obs in ("phso", "phdo"):
@@ -191,18 +190,15 @@ def test_report_has_the_robust_section(tmp_path):
         # recompute the simulated column: the batch at every corner, then the scalar
         # simulate() at the worst corners, whose full records give the max |error| directly
         gains = tuning.observer_gains_for(obs)
-        batch = simulate_batch(
-            p, ref, corners, dt=dt, duration=duration, controller=ctrl, gains=gains,
-            observer=obs, delay=tuning.delay, **start,
-        )  # fmt: skip
+        loop = ClosedLoop(
+            p, ObserverSpec.of(obs, gains), ctrl, dt=dt, delay=tuning.delay, start="reference"
+        )
+        batch = simulate_batch(loop, ref, corners, duration=duration)
         assert rob["simulated_window"] == list(batch.window)
         assert rob["simulated_input_rate_max"] == pytest.approx(np.max(batch.input_rate_max))
         for col, want in ((None, rob["simulated_worst_maxe"]), (0, est[0]), (2, est[2])):
             worst = int(np.argmax(batch.maxe if col is None else batch.estimation_maxe[:, col]))
-            r = simulate(
-                p, ref, dt=dt, duration=duration, controller=ctrl, gains=gains, observer=obs,
-                delay=tuning.delay, true_params=corners[worst], **start,
-            )  # fmt: skip
+            r = simulate(loop, ref, duration=duration, true_params=corners[worst])
             t = np.asarray(r.t)
             sel = (t >= batch.window[0] - 1e-12) & (t <= batch.window[1] + 1e-12)
             if col is None:

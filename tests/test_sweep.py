@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bwdesign.sim.start import start_on_reference
 
 from bwdesign import (
     DiscreteTrackingController,
@@ -25,10 +26,8 @@ from bwdesign.cli.main import main
 from bwdesign.errors import InputError, UnboundedModelError
 from bwdesign.model.config import load_config
 from bwdesign.model.envelope import derive_envelope
-from bwdesign.report.sweep import sweep_summary
 from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
 from bwdesign.sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, replay_row
-from bwdesign.sim.start import start_on_reference
 from bwdesign.sim.sweep import (
     MEMORY_CAP,
     ROW_BYTES,
@@ -44,6 +43,7 @@ from bwdesign.sim.sweep import (
     run_sweep,
     spec_from_config,
 )
+from bwdesign.study.sweep import sweep_summary
 
 DT = 2e-4
 P = preset("paper_experiment")
