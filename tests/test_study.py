@@ -89,6 +89,22 @@ def test_the_requirements_tracking_is_a_study_part_on_every_corner(tmp_path):
     assert study(config, parts={"plant"}).settings == StudySettings()
 
 
+def test_check_requirements_reads_one_study(monkeypatch):
+    import bwdesign.testing.checks as checks
+
+    calls = []
+    real = checks.study
+
+    def counted(config, **kw):
+        calls.append(kw["parts"])
+        return real(config, **kw)
+
+    monkeypatch.setattr(checks, "study", counted)
+    out = checks.check_requirements(STAGE)
+    assert len(out) == 6 and all(c.passed for c in out)
+    assert calls == [{"configured", "corner_tracking", "loop"}]
+
+
 def test_render_needs_every_part_the_report_shows(tmp_path):
     from bwdesign.report.certified import render
 
