@@ -8,6 +8,7 @@ that the requirements' tracking is a study part, and the CLI's request objects.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 from pathlib import Path
 
@@ -115,3 +116,47 @@ def test_render_needs_every_part_the_report_shows(tmp_path):
         render({"plant": None}, tmp_path / "figures")
     assert not (tmp_path / "figures").exists()
     assert isinstance(s, Study)
+
+
+# -- the CLI builds one frozen request and leaves its namespace alone ------------------
+
+
+def test_report_and_check_requests_do_not_touch_the_namespace(tmp_path, capsys):
+    from bwdesign.cli.check import CheckRequest, run_check
+    from bwdesign.cli.report import ReportRequest, run_report
+
+    ns = argparse.Namespace(
+        config=str(tmp_path / "missing.toml"),
+        out=str(tmp_path / "out"),
+        force=False,
+        quiet=True,
+        allow_unbounded=False,
+    )
+    before = dict(vars(ns))
+    req = ReportRequest.from_args(ns)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        req.quiet = False
+    with pytest.raises(ConfigError):
+        run_report(ns)
+    assert vars(ns) == before
+    ns = argparse.Namespace(files=[str(tmp_path / "missing.toml")], junit_xml=None, json=False)
+    before = dict(vars(ns))
+    assert run_check(ns) == 2
+    assert vars(ns) == before and CheckRequest.from_args(ns).files == tuple(ns.files)
+    assert capsys.readouterr().err.startswith("error: ")
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"files": ()}, "at least one stage file"),
+        ({"files": "stage.toml"}, "sequence of paths"),
+        ({"files": ("a.toml",), "junit_xml": 3}, "--junit-xml must be a path"),
+    ],
+)
+def test_check_request_is_validated(kwargs, message):
+    from bwdesign.cli.args import UsageError
+    from bwdesign.cli.check import CheckRequest
+
+    with pytest.raises(UsageError, match=message):
+        CheckRequest(**kwargs)
