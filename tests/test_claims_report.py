@@ -199,7 +199,7 @@ def test_units_follow_the_stage(saturating_report, capsys):
 
 
 def test_plots_label_the_input_unit():
-    from bwdesign import Sine, simulate
+    from bwdesign import ClosedLoop, ObserverSpec, Sine, make_controller, simulate
     from bwdesign.model.params import preset
     from bwdesign.plotting import figures
 
@@ -210,15 +210,10 @@ def test_plots_label_the_input_unit():
             "input_unit": "mV",
         }
     )
-    r = simulate(
-        mv,
-        Sine(amplitude=10, offset=10, frequency=5),
-        dt=2e-4,
-        duration=0.2,
-        gains=(8, 64, -512),
-        lambda1=1,
-        lambda2=2,
+    loop = ClosedLoop(
+        mv, ObserverSpec.of("phso", (8, 64, -512)), make_controller(mv, 1, 2), dt=2e-4
     )
+    r = simulate(loop, Sine(amplitude=10, offset=10, frequency=5), duration=0.2)
     _, axes = figures.plot_tracking_comparison({"PHSO": r})
     assert axes[2, 0].get_ylabel() == "control input u (mV)"
     _, axes = r.plot()

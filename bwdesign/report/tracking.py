@@ -6,6 +6,7 @@ The runs and their reproducing commands are computed by :mod:`bwdesign.study.tra
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -36,26 +37,7 @@ def tracking_section(doc: Document, study: Study, figs: Path) -> None:
     doc.heading("Simulated tracking at the envelope")
     first = runs[0].result
     x0 = ", ".join(f"{x:.6g}" for x in first.settings["x0"])
-    srow = []
-    for run in runs:
-        r = run.result
-        sat = fmt(100 * r.saturated_fraction, 3) if r.settings.get("u_limits") else "no limits"
-        if r.metrics is None:
-            srow.append([run.label, "unstable", "-", "-", "-", "-", "-", sat])
-            continue
-        er = r.estimation_rmse
-        srow.append(
-            [
-                run.label,
-                fmt(r.metrics.maxe),
-                fmt(r.metrics.me),
-                fmt(r.metrics.rmse),
-                fmt(er[0], 3),
-                fmt(er[1], 3),
-                fmt(er[2], 3),
-                sat,
-            ]
-        )
+    srow = [_row(run) for run in runs]
     w = first.window
     doc.para(
         f"Reference {ref.describe()}, dt = {dt * 1e3:g} ms, {first.settings['duration']:g} s "
@@ -101,31 +83,47 @@ def tracking_section(doc: Document, study: Study, figs: Path) -> None:
     fig, _ = plotting.plot_tracking_comparison(runs_by_label, title="tracking at the envelope")
     plotting.save_figure(fig, figs / "tracking.png")
     doc.figure(f"{figs.name}/tracking.png", "Tracking, error and input over the metrics window")
+    _estimation_figure(doc, runs_by_label, figs, lu, plotting)
+
+
+def _row(run: Any) -> list[str]:
+    """A run's row: MAXE, ME, RMSE, estimation RMSE per state, saturated share."""
+    r = run.result
+    sat = fmt(100 * r.saturated_fraction, 3) if r.settings.get("u_limits") else "no limits"
+    if r.metrics is None:
+        return [run.label, "unstable", "-", "-", "-", "-", "-", sat]
+    er = r.estimation_rmse
+    m = r.metrics
+    return [run.label, fmt(m.maxe), fmt(m.me), fmt(m.rmse)] + [fmt(e, 3) for e in er[:3]] + [sat]
+
+
+def _estimation_figure(
+    doc: Document, results: dict[str, Any], figs: Path, lu: str, plotting: Any
+) -> None:
+    """The estimation error of each state of every bounded run (or a sentence: none)."""
     curves = {}
     panels = {
         "x1 displacement": f"|x1hat - x1| ({lu})",
         "x2 velocity": f"|x2hat - x2| ({lu}/s)",
         "x3 hysteresis": f"|x3hat - x3| ({lu})",
     }
-    for label, r in runs_by_label.items():
+    for label, r in results.items():
         if r.stable:
             err = np.asarray(r.xhat) - np.asarray(r.x)
             for i, panel in enumerate(panels):
                 curves[f"{panel} | {label}"] = (np.asarray(r.t), err[:, i])
-    if curves:
-        fig, _ = plotting.plot_estimation_errors(
-            curves,
-            title="estimation errors in the loop",
-            ylabel=panels,
-            stack=True,
-            decades=ESTIMATION_DECADES,
-        )
-        plotting.save_figure(fig, figs / "estimation_errors.png")
-        doc.figure(
-            f"{figs.name}/estimation_errors.png", "Estimation error of each state in the loop"
-        )
-    else:
+    if not curves:
         doc.para("No run stayed bounded, so there is no estimation-error figure.")
+        return
+    fig, _ = plotting.plot_estimation_errors(
+        curves,
+        title="estimation errors in the loop",
+        ylabel=panels,
+        stack=True,
+        decades=ESTIMATION_DECADES,
+    )
+    plotting.save_figure(fig, figs / "estimation_errors.png")
+    doc.figure(f"{figs.name}/estimation_errors.png", "Estimation error of each state in the loop")
 
 
 def _gains_cell(command: tuple[str, ...]) -> str:

@@ -18,6 +18,7 @@ from typing import Any
 
 from ..certify.linear import ErrorDynamics, HysteresisBode
 from ..certify.results import CertificateReport, SynthesisResult
+from ..certify.robust import RobustCertificate
 from ..control.analysis import LoopAnalysis
 from ..control.tuning import DigitalTuning
 from ..errors import InputError
@@ -25,6 +26,7 @@ from ..model.config import StageConfig
 from ..model.envelope import Envelope
 from ..model.params import BoucWenParams
 from ..sim.batch import BatchResult
+from ..sim.sweep import SweepSpec
 from .tiers import TierSynthesis
 from .tracking import TrackingRun
 
@@ -254,7 +256,7 @@ class CornerTracking:
 class SweepStudy:
     """The report's Monte Carlo sweep over ``[uncertainty]`` (``[sweep]``)."""
 
-    spec: Any
+    spec: SweepSpec
     tuning: str
     bounds: dict[str, tuple[float, float]]
     samples: int
@@ -283,7 +285,7 @@ class RobustLoop:
 
     observer: str
     gains: tuple[float, ...]
-    certificate: Any
+    certificate: RobustCertificate
     envelope: float
     simulated_input_rate_max: float
     simulated_worst_maxe: float
