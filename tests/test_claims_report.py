@@ -13,7 +13,8 @@ from bwdesign.cli.main import main
 from bwdesign.control.tuning import digital_tuning
 from bwdesign.errors import UnboundedModelError
 from bwdesign.model.config import load_config
-from bwdesign.report.certified import build_report, certificate_document
+from bwdesign.report.certified import build_report
+from bwdesign.study import CERTIFICATE_PARTS, study
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "paper_experiment.toml"
@@ -29,7 +30,7 @@ def _config(tmp_path, name, text):
 
 def tracking_runs(config, **kw):
     """The report's runs (imported here: the module is new, the other tests run without it)."""
-    from bwdesign.report.tracking import tracking_runs as runs
+    from bwdesign.study.tracking import tracking_runs as runs
 
     return runs(config, **kw)
 
@@ -49,7 +50,7 @@ def test_report_allow_unbounded_is_passed_through(tmp_path, capsys):
     cfg = _config(tmp_path, "unbounded.toml", UNBOUNDED)
     config = load_config(cfg)
     with pytest.raises(UnboundedModelError):
-        certificate_document(config)
+        study(config, parts=CERTIFICATE_PARTS)
     out = tmp_path / "out"
     assert main(["report", "--config", str(cfg), "--out", str(out), "--quiet"]) == 2
     _, err = capsys.readouterr()
@@ -65,7 +66,8 @@ def test_report_allow_unbounded_is_passed_through(tmp_path, capsys):
 def paper_report(tmp_path_factory):
     out = tmp_path_factory.mktemp("paper")
     config = load_config(CONFIG)
-    doc, cert, ok, verdict = build_report(config, out, quiet=True, date=DATE)
+    doc, s = build_report(config, out, quiet=True, date=DATE)
+    cert = s.to_dict()
     runs = tracking_runs(config, gains=config.gains, tuning=digital_tuning(config.plant, config.dt))
     return doc.to_markdown(), cert, runs
 

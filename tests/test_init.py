@@ -23,7 +23,7 @@ from bwdesign.model import references
 from bwdesign.model.params import MODEL_FIELDS, PHYSICAL_FIELDS
 from bwdesign.model.params import PRESETS as PLANT_PRESETS
 from bwdesign.model.stage_presets import STAGES_DIR, preset_catalogue, resolve_config
-from bwdesign.report.certified import DEFAULT_DECAY
+from bwdesign.study import DEFAULT_DECAY
 
 ROOT = Path(__file__).resolve().parents[1]
 PRESETS = sorted(stage_presets())

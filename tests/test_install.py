@@ -36,7 +36,7 @@ from bwdesign.cli.init import starter_config
 from bwdesign.extras import EXTRAS, require
 from bwdesign.model.stage_presets import STAGES_DIR
 from bwdesign.output.jsonenc import dump_json
-from bwdesign.report.certified import REPORT_SECTIONS, certificate_document
+from bwdesign.study import CERTIFICATE_PARTS, REPORT_SECTIONS, study
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
@@ -196,7 +196,7 @@ print(json.dumps({"file": bwdesign.__file__, "version": bwdesign.__version__,
 
 
 def _source_certificate(config_path: Path) -> dict:
-    doc, _, _ = certificate_document(load_config(config_path))
+    doc = study(load_config(config_path), parts=CERTIFICATE_PARTS).to_dict()
     return json.loads(dump_json(doc))
 
 

@@ -28,6 +28,7 @@ LAYERS = (
     ("certify",),
     ("codegen",),
     ("sim",),
+    ("study",),
     ("report",),
     ("testing",),
     ("cli",),

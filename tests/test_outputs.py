@@ -19,6 +19,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -29,7 +30,7 @@ import bwdesign.output.files.directory as directory
 import bwdesign.output.files.staging as files_staging
 import bwdesign.report.certified as certified
 from bwdesign.cli.main import main
-from bwdesign.errors import OutputError
+from bwdesign.errors import ConfigError, OutputError
 from bwdesign.output.files import MANIFEST, prepare_directory, prepare_file
 from bwdesign.report.document import Document
 
@@ -44,13 +45,14 @@ SIM = [
 
 
 def _fake_build(config, out, *, allow_unbounded=False, quiet=False, date=None, out_dir=None):
-    """Stand-in for the report's computation: a figure, a document, a verdict."""
+    """Stand-in for the report's study and rendering: a figure, a document, a verdict."""
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)
     (figs / "a.png").write_bytes(b"\x89PNG fake")
     doc = Document("fake report")
     doc.para("fake")
-    return doc, {"fake": True}, True, "CERTIFIED (fake)"
+    verdict = SimpleNamespace(ok=True, text="CERTIFIED (fake)")
+    return doc, SimpleNamespace(to_dict=lambda: {"fake": True}, verdict=verdict)
 
 
 @pytest.fixture
@@ -250,7 +252,7 @@ def test_report_refuses_a_foreign_manifest(tmp_path, fast_report, capsys, manife
 
 def test_failed_run_leaves_no_directory_and_no_debris(tmp_path, monkeypatch, capsys):
     def boom(*a, **k):
-        raise certified.ConfigError("the computation failed")
+        raise ConfigError("the computation failed")
 
     monkeypatch.setattr(certified, "build_report", boom)
     assert report(tmp_path / "deep" / "new") == 2

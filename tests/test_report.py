@@ -10,7 +10,8 @@ import pytest
 from bwdesign.cli.main import main
 from bwdesign.model.config import load_config
 from bwdesign.output.jsonenc import dump_json
-from bwdesign.report.certified import REPORT_SECTIONS, certificate_document, write_report
+from bwdesign.report.certified import write_report
+from bwdesign.study import CERTIFICATE_PARTS, REPORT_SECTIONS, study
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "paper_experiment.toml"
@@ -126,7 +127,7 @@ def _compare(new, old, path=""):
 def test_committed_certificate_json_is_current():
     """Regenerate certificate.json and compare with the committed one (tolerances above)."""
     committed = json.loads((COMMITTED / "certificate.json").read_text())
-    doc, _, _ = certificate_document(load_config(CONFIG))
+    doc = study(load_config(CONFIG), parts=CERTIFICATE_PARTS).to_dict()
     fresh = json.loads(dump_json(doc))
     _compare(fresh, committed)
 
@@ -275,7 +276,7 @@ def test_tier_search_brackets_the_feasibility_edge():
     """The search over the requested rate stops within SEARCH_RTOL of a feasibility edge."""
     from types import SimpleNamespace
 
-    from bwdesign.report.tiers import SEARCH_RTOL, _search
+    from bwdesign.study.tiers import SEARCH_RTOL, search_requested_rate
 
     for edge, start in ((1234.5, 10.0), (3.0, 10.0)):
         calls = []
@@ -284,7 +285,7 @@ def test_tier_search_brackets_the_feasibility_edge():
             calls.append(u)
             return SimpleNamespace(feasible=u <= edge)
 
-        tried = _search(run, start, start <= edge)
+        tried = search_requested_rate(run, start, start <= edge)
         ok = [u for u, res in tried if res.feasible] + ([start] if start <= edge else [])
         bad = [u for u, res in tried if not res.feasible] + ([] if start <= edge else [start])
         assert max(ok) <= edge < min(bad) <= max(ok) * (1 + SEARCH_RTOL)
@@ -321,7 +322,7 @@ def test_tier_rows_when_synthesis_says_no(monkeypatch):
     """theorem1 below the stage's rate: gains fetched at half its envelope; no design: no gains."""
     from types import SimpleNamespace
 
-    import bwdesign.report.tiers as tiers
+    import bwdesign.study.tiers as tiers
     from bwdesign import preset
 
     calls = []

@@ -145,12 +145,13 @@ def test_paper_experiment_64_vertices():
 @pytest.mark.slow
 def test_report_has_the_robust_section(tmp_path):
     """Certified peak bounds beside the corners' steady-state max |error| (like for like)."""
-    from bwdesign import load_config, simulate
+    from bwdesign import ClosedLoop, ObserverSpec, load_config, simulate
     from bwdesign.control.tuning import digital_tuning
     from bwdesign.report.certified import build_report
 
     config = load_config("stack_actuator_800hz")
-    doc, cert, _, _ = build_report(config, tmp_path, quiet=True)
+    doc, s = build_report(config, tmp_path, quiet=True)
+    cert = s.to_dict()
     md = doc.to_markdown()
     section = md.split("## Robust certificate")[1].split("\n## ")[0]
     assert "RMS" not in section

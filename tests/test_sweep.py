@@ -30,7 +30,6 @@ from bwdesign.control.loop import ON_REFERENCE
 from bwdesign.errors import ConfigError, InputError, ParameterError
 from bwdesign.model.config import load_config
 from bwdesign.model.envelope import derive_envelope
-from bwdesign.report.sweep import sweep_summary
 from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
 from bwdesign.sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, replay_row
 from bwdesign.sim.sweep import (
@@ -48,6 +47,7 @@ from bwdesign.sim.sweep import (
     spec_from_config,
     sweep_box,
 )
+from bwdesign.study.sweep import sweep_summary
 
 DT = 2e-4
 P = preset("paper_experiment")

@@ -255,7 +255,7 @@ def _robust_request(args: argparse.Namespace, stage: Stage) -> dict:
     args.input_range = stage.default(args, "input_range", "[controller]", limits)
     if args.input_range is None and cfg is not None and cfg.reference is not None:
         from ..model.envelope import given_envelope
-        from ..report.tracking import required_input
+        from ..study.tracking import required_input
 
         env = cfg.envelope(allow_unbounded=args.allow_unbounded) or given_envelope(args.udot_max)
         rng = required_input(cfg, env, allow_unbounded=args.allow_unbounded)

@@ -5,21 +5,26 @@ line per requirement. Exit codes: 0 all pass; 1 one fails (observer gains that a
 not Hurwitz included: every requirement on them fails); 2 bad input (a file that
 cannot be read, a malformed section, a requirement whose section is missing), and
 then ``--junit-xml`` is not written (the other files' lines are still printed).
+
+The command line becomes one frozen :class:`CheckRequest` (validated once); the
+argparse namespace is read, never changed. Each file's requirements are read from
+one study of it (:func:`bwdesign.testing.checks.check_requirements`).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import dataclass
 
 from ..errors import BWDesignError
 from ..output.files import prepare_file
 from ..output.jsonenc import dump_json
 from ..testing.checks import check_requirements
 from ..testing.junit import junit_xml
-from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK
+from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK, UsageError
 
-__all__ = ["check_args", "run_check"]
+__all__ = ["CheckRequest", "check_args", "run_check"]
 
 
 def check_args(p: argparse.ArgumentParser) -> None:
@@ -31,15 +36,53 @@ def check_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
 
 
+@dataclass(frozen=True)
+class CheckRequest:
+    """What ``bwdesign check`` was asked.
+
+    Parameters
+    ----------
+    files : tuple of str
+        Stage files or bundled presets' names, in the order given (at least one).
+    junit_xml : str, optional
+        Where to write the JUnit XML report.
+    json : bool
+        Print one JSON document instead of one line per requirement.
+    """
+
+    files: tuple[str, ...]
+    junit_xml: str | None = None
+    json: bool = False
+
+    def __post_init__(self) -> None:
+        files = self.files
+        if isinstance(files, str) or not all(isinstance(f, str) for f in files):
+            raise UsageError(f"files must be a sequence of paths, got {files!r}")
+        object.__setattr__(self, "files", tuple(files))
+        if not self.files:
+            raise UsageError("check needs at least one stage file")
+        if self.junit_xml is not None and not isinstance(self.junit_xml, str):
+            raise UsageError(f"--junit-xml must be a path, got {self.junit_xml!r}")
+        if not isinstance(self.json, bool):
+            raise UsageError(f"json must be true or false, got {self.json!r}")
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> CheckRequest:
+        """The request of parsed arguments (read only)."""
+        return cls(files=tuple(args.files), junit_xml=args.junit_xml, json=args.json)
+
+
 def run_check(args: argparse.Namespace) -> int:
+    """Check every file the :class:`CheckRequest` ``args`` names; print, exit 0, 1 or 2."""
+    req = CheckRequest.from_args(args)
     junit = None
-    if args.junit_xml is not None:
+    if req.junit_xml is not None:
         junit = prepare_file(
-            args.junit_xml, command="check junit", comment="<!--", what="--junit-xml"
+            req.junit_xml, command="check junit", comment="<!--", what="--junit-xml"
         )
     results = []
     bad = False
-    for f in args.files:
+    for f in req.files:
         try:
             results.append((f, check_requirements(f)))
         except BWDesignError as err:
@@ -49,7 +92,7 @@ def run_check(args: argparse.Namespace) -> int:
     failed = any(isinstance(c, list) and not all(x.passed for x in c) for _, c in results)
     if junit is not None and not bad:  # exit 2 writes nothing
         junit.write_text(junit_xml(results))
-    if args.json:
+    if req.json:
         print(
             dump_json(
                 {

@@ -24,7 +24,6 @@ from .args import (
     EXIT_BAD_INPUT,
     EXIT_INTERRUPTED,
     EXIT_NO,
-    EXIT_OK,
     _Parser,
     add_plant_args,
 )
@@ -52,50 +51,6 @@ def _lazy(module: str, name: str) -> Callable[..., Any]:
         return getattr(import_module(f"bwdesign.{module}"), name)(*args)
 
     return call
-
-
-def _report_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument(
-        "--config",
-        required=True,
-        metavar="FILE.toml",
-        help="stage configuration file, or a bundled preset's name (see bwdesign presets)",
-    )
-    p.add_argument(
-        "--out",
-        required=True,
-        metavar="DIR",
-        help="report directory: new, empty, or a report bwdesign wrote (its files are "
-        "replaced); never the current directory",
-    )
-    p.add_argument(
-        "--force",
-        action="store_true",
-        help="write into a directory holding other files (they are kept, never overwritten)",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
-    p.add_argument(
-        "--allow-unbounded",
-        action="store_true",
-        help="accept parameters outside the bounded Bouc-Wen class",
-    )
-
-
-def _cmd_report(args: argparse.Namespace) -> int:
-    from ..model.config import load_config
-    from ..output.files import prepare_directory
-    from ..report.certified import write_report
-
-    prepare_directory(args.out, command="report", force=args.force, what="--out")
-    outcome = write_report(
-        load_config(args.config),
-        args.out,
-        quiet=args.quiet,
-        allow_unbounded=args.allow_unbounded,
-        force=args.force,
-    )
-    print(f"{outcome.out_dir}/report.md: {outcome.verdict}")
-    return EXIT_OK if outcome.certified else EXIT_NO
 
 
 COMMANDS: list[Command] = [
@@ -144,8 +99,8 @@ COMMANDS: list[Command] = [
     (
         "report",
         "write the certified-gains report (Markdown, HTML, JSON, figures) for a stage config",
-        _report_args,
-        _cmd_report,
+        _lazy("cli.report", "report_args"),
+        _lazy("cli.report", "run_report"),
     ),
     (
         "init",

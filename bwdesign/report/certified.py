@@ -1,65 +1,43 @@
-"""The certified-gains report: one stage configuration in, a report to hand on out.
+"""The certified-gains report: a rendering of a stage's computed study.
 
-:func:`write_report` turns a :class:`~bwdesign.model.config.StageConfig` into a
-directory holding ``report.md``, a self-contained ``report.html``,
-``certificate.json`` and ``figures/*.png``. Everything is computed here from
-the configuration; nothing is edited by hand. The directory is written through
-:mod:`bwdesign.output.files`: staged inside the target and moved into place at
-the end, so an error never leaves a half-written report, and no file bwdesign
-did not write is ever touched.
-
-The numbers in ``certificate.json`` come from :func:`certificate_document`,
-which the determinism test re-runs and compares with the committed file, and
-from the report's own sections (:data:`REPORT_SECTIONS`: the synthesis per
-tier, the sweep, the robust certificate), which :func:`build_report` adds.
+:func:`write_report` computes the :class:`~bwdesign.study.Study` of a
+:class:`~bwdesign.model.config.StageConfig` (:func:`bwdesign.study.study`) and
+writes a directory holding ``report.md``, a self-contained ``report.html``,
+``certificate.json`` (the study's :meth:`~bwdesign.study.Study.to_dict`) and
+``figures/*.png``. :func:`render` turns a study into the document: prose, tables
+and the figures, drawn from the study's data; it computes nothing. The
+directory is written through :mod:`bwdesign.output.files`: staged inside the
+target and moved into place at the end, so an error never leaves a half-written
+report, and no file bwdesign did not write is ever touched.
 """
 
 from __future__ import annotations
 
 import os
-import platform
 import shlex
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
-from ..certify.linear import error_dynamics, hysteresis_bode
-from ..certify.results import CertificateReport, SynthesisResult
-from ..certify.synthesis import synthesize
-from ..certify.tiers import certify
-from ..control.analysis import analyze_loop
-from ..control.tuning import digital_tuning
-from ..errors import ConfigError, InputError
+from ..certify.results import CertificateReport
+from ..errors import InputError
 from ..model.config import StageConfig
-from ..model.envelope import Envelope
-from ..model.params import require_bounded
 from ..model.stage_presets import STAGES_DIR
-from ..model.summary import plant_summary
-from ..observers.gains import check_gains, discrete_gains
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
-from ..sim.sweep import check_samples, sweep_box
-from .document import Document
-from .document import fmt as _fmt
+from ..output.text import gains_text, limits_text
+from ..study import REPORT_PARTS, Study, study
+from .document import Document, fmt
 from .robust import robust_section
-from .summary import ReportSummary, summary_block
+from .summary import summary_block
 from .sweep import sweep_section
-from .tiers import synthesize_per_tier, tier_synthesis_section
-from .tracking import TrackingRun, input_limits, required_input, tracking_runs, tracking_section
-from .tracking import limits_text as _limits_text
+from .tiers import tier_synthesis_section
+from .tracking import tracking_section
 
-__all__ = ["ReportOutcome", "certificate_document", "write_report", "DEFAULT_DECAY"]
-
-#: Decay rate (1/s) requested from synthesis when the config has no [synthesis] decay.
-DEFAULT_DECAY = 100.0
-
-#: Entries of ``certificate.json`` that :func:`build_report` adds to
-#: :func:`certificate_document`'s (each from its own section's module).
-REPORT_SECTIONS = ("tier_synthesis", "sweep", "robust")
+__all__ = ["ReportOutcome", "build_report", "render", "write_report", "TIER_MEANING"]
 
 #: Files every report holds (checked against foreign files before any work).
 REPORT_FILES = ("report.md", "report.html", "certificate.json")
@@ -108,153 +86,6 @@ class ReportOutcome:
     verdict: str
 
 
-def _require(config: StageConfig, *, allow_unbounded: bool = False) -> tuple[float, Envelope]:
-    missing = []
-    if config.dt is None:
-        missing.append("[sampling] (dt)")
-    if config.envelope_spec is None:
-        missing.append("[envelope] (udot_max or from_reference)")
-    if config.reference is None:
-        missing.append("[reference] (the trajectory simulated at the envelope)")
-    if config.controller is None:
-        missing.append("[controller] (lambda1, lambda2)")
-    if missing:
-        raise ConfigError(
-            f"{config.source or 'config'}: the report needs section(s) {', '.join(missing)}"
-        )
-    env = config.envelope(allow_unbounded=allow_unbounded)
-    return float(config.dt), env
-
-
-def _synthesis_request(config: StageConfig) -> dict[str, Any]:
-    spec = config.synthesis or {}
-    return {"decay": spec.get("decay", DEFAULT_DECAY), "pole_radius": spec.get("pole_radius")}
-
-
-def certificate_document(
-    config: StageConfig, *, allow_unbounded: bool = False
-) -> tuple[dict[str, Any], CertificateReport | None, SynthesisResult]:
-    """The content of ``certificate.json`` and the objects behind it.
-
-    Returns
-    -------
-    doc : dict
-        ``configured`` and ``synthesized`` (each a ``bwdesign certify --json``
-        document), ``synthesis`` (the request and its outcome), ``envelope``,
-        ``firmware`` (discrete gains at dt, full precision) and ``config``.
-    configured : CertificateReport or None
-    synthesized : SynthesisResult
-    """
-    params = config.plant
-    require_bounded(params, allow_unbounded)
-    dt, env = _require(config, allow_unbounded=allow_unbounded)
-    v = env.udot_max
-    configured = None
-    if config.gains is not None:
-        configured = certify(
-            params, config.gains, udot_max=v, dt=dt, allow_unbounded=allow_unbounded
-        )
-    req = _synthesis_request(config)
-    synth = synthesize(
-        params,
-        udot_max=v,
-        decay=req["decay"],
-        pole_radius=req["pole_radius"],
-        dt=dt,
-        allow_unbounded=allow_unbounded,
-    )
-    firmware: dict[str, Any] = {
-        "dt": dt,
-        "form": "x_post = x_prior + K (z - x_prior[0]); see bwdesign.observers",
-    }
-    if configured is not None:
-        firmware["configured_K"] = [float(k) for k in configured.discrete_gains]
-    if synth.discrete_gains is not None:
-        firmware["synthesized_K"] = [float(k) for k in synth.discrete_gains]
-    sdoc = synth.to_dict()
-    doc = {
-        "config": {"source": Path(config.source).name, "sha256": config.sha256},
-        "envelope": env.to_dict(),
-        "configured": None if configured is None else configured.to_dict(),
-        "synthesized": None if synth.report is None else synth.report.to_dict(),
-        "synthesis": {
-            k: sdoc[k]
-            for k in (
-                "feasible",
-                "tier",
-                "gains",
-                "discrete_gains",
-                "decay",
-                "pole_radius",
-                "binding",
-                "reason",
-                "max_decay",
-                "max_udot",
-                "solver",
-                "status",
-            )
-        },
-        "firmware": firmware,
-        "input": _input_document(config, env, allow_unbounded),
-        "units": _units(params),
-    }
-    return doc, configured, synth
-
-
-def _units(params: Any) -> dict[str, Any]:
-    """The units of the numbers in ``certificate.json`` (from the stage's length/input unit)."""
-    iu = params.input_unit
-    return {
-        "length": params.length_unit,
-        "input": iu,
-        "udot_max": f"{iu}/s",
-        "max_udot": f"{iu}/s",
-        "decay": "1/s",
-        "decay_rate": "1/s",
-        "gains": ["1/s", "1/s^2", "1/s"],
-        "dt": "s",
-        "pole_radius": "rad/s",
-    }
-
-
-def _input_document(config: StageConfig, env: Envelope, allow_unbounded: bool) -> dict[str, Any]:
-    """Input limits, the feedforward input the reference needs, and whether it fits."""
-    limits = input_limits(config)
-    need = required_input(config, env, allow_unbounded=allow_unbounded)
-    within = None
-    if limits is not None and need is not None:
-        within = bool(limits[0] <= need[0] and need[1] <= limits[1])
-    return {
-        "limits": None if limits is None else list(limits),
-        "feedforward_range": None if need is None else list(need),
-        "within_limits": within,
-    }
-
-
-def _gains_text(g: Any) -> str:
-    return "(" + ", ".join(f"{float(v):.6g}" for v in g) + ")" if g is not None else "-"
-
-
-def _versions() -> dict[str, str]:
-    out = {"python": platform.python_version()}
-    for pkg in (
-        "bwdesign",
-        "numpy",
-        "scipy",
-        "cvxpy",
-        "clarabel",
-        "scs",
-        "control",
-        "filterpy",
-        "matplotlib",
-    ):
-        try:
-            out[pkg] = version(pkg)
-        except PackageNotFoundError:
-            out[pkg] = "not installed"
-    return out
-
-
 def _tier_cell(rep: CertificateReport | None, name: str) -> list[str]:
     if rep is None:
         return ["-", "-", "-", "-"]
@@ -263,147 +94,28 @@ def _tier_cell(rep: CertificateReport | None, name: str) -> list[str]:
     except KeyError:
         return ["-", "-", "-", "-"]
     worst = min((m.limit - m.value for m in c.margins), default=None) if c.holds else None
-    env = _fmt(c.max_udot) + (" (search limit)" if c.max_udot_capped else "")
+    env = fmt(c.max_udot) + (" (search limit)" if c.max_udot_capped else "")
     return [
         "**yes**" if c.holds else "no",
         env,
-        _fmt(c.decay_rate),
-        _fmt(worst, 3) if worst is not None else "-",
+        fmt(c.decay_rate),
+        fmt(worst, 3) if worst is not None else "-",
     ]
 
 
-def _verdict(
-    config: StageConfig,
-    configured: CertificateReport | None,
-    synth: SynthesisResult,
-    v: float,
-    inp: dict[str, Any],
-    runs: list[TrackingRun],
-) -> tuple[bool, str]:
-    """The sentence at the top and the flag behind the exit code.
-
-    Not certified, infeasible synthesis, or a reference whose feedforward input
-    leaves ``[controller] u_min/u_max`` each make the flag False (exit 1).
-    """
-    iu = config.plant.input_unit
-    parts = []
-    ok = True
-    fits = inp["within_limits"] is not False
-    if configured is not None:
-        if configured.certified and fits:
-            parts.append(
-                f"CERTIFIED: the configured gains {_gains_text(config.gains)} hold at "
-                f"|u'| <= {v:.4g} {iu}/s (strongest tier: {configured.best})."
-            )
-        elif configured.certified:
-            parts.append(
-                f"OBSERVER CERTIFIED, REFERENCE OUT OF INPUT LIMITS: the configured gains "
-                f"{_gains_text(config.gains)} hold at |u'| <= {v:.4g} {iu}/s (strongest tier: "
-                f"{configured.best})."
-            )
-        else:
-            ok = False
-            parts.append(
-                f"NOT CERTIFIED: no tier certifies the configured gains "
-                f"{_gains_text(config.gains)} at |u'| <= {v:.4g} {iu}/s."
-            )
-    if configured is None:
-        parts.append("No observer gains configured ([observer] gains); synthesis only.")
-    if synth.feasible:
-        where = "at the same envelope" if configured is not None else f"at |u'| <= {v:.4g} {iu}/s"
-        parts.append(
-            f"Synthesised gains certified {where}: l = {_gains_text(synth.gains)}, "
-            f"{synth.tier} tier, |u'| <= {synth.udot_max:.6g} {iu}/s, decay >= "
-            f"{synth.decay:g} 1/s, poles within {synth.pole_radius:.6g} rad/s."
-        )
-    else:
-        ok = False
-        parts.append(f"SYNTHESIS INFEASIBLE: {synth.reason}.")
-    sat = [r.result.saturated_fraction for r in runs if r.result.settings.get("u_limits")]
-    sat_text = (
-        f"the simulated loops saturate {100 * min(sat):.3g} to {100 * max(sat):.3g} % of the time"
-        if sat
-        else ""
-    )
-    if not fits:
-        ok = False
-        (lo, hi), (a, b) = inp["limits"], inp["feedforward_range"]
-        parts.append(
-            ("" if configured is not None and configured.certified else "INPUT OUT OF LIMITS: ")
-            + f"The reference needs the feedforward input {a:.4g} .. "
-            f"{b:.4g} {iu}, outside the input limits {_fmt(lo)} .. {_fmt(hi)} {iu} "
-            f"([controller] u_min/u_max); {sat_text}, so the tracking numbers below are for a "
-            "saturated loop and the stage cannot follow this reference. What holds: the "
-            "observer certificates, for an applied (clipped) input with |u'| within the "
-            "envelope; the envelope itself was derived from the unclipped feedforward."
-        )
-    elif sat and max(sat) > 0:
-        parts.append(f"Input limits {_limits_text(inp['limits'], iu)}: {sat_text}.")
-    return ok, " ".join(parts)
-
-
-def _progress(quiet: bool) -> Callable[[str], None]:
+def _progress(quiet: bool) -> Callable[[str], None] | None:
     def say(msg: str) -> None:
-        if not quiet:
-            print(f"[report] {msg}", file=sys.stderr, flush=True)
+        print(f"[report] {msg}", file=sys.stderr, flush=True)
 
-    return say
+    return None if quiet else say
 
 
-def build_report(
-    config: StageConfig,
-    out: Path,
-    *,
-    allow_unbounded: bool = False,
-    quiet: bool = False,
-    date: str | None = None,
-    out_dir: str | Path | None = None,
-) -> tuple[Document, dict[str, Any], bool, str]:
-    """Compute everything and write figures into ``out / "figures"``.
+# -- sections ------------------------------------------------------------------------
 
-    ``out_dir``: the report's directory as the user named it (``out`` may be a
-    staging folder inside it), for the reproducibility command's ``--out``.
 
-    Returns the document, the certificate JSON document, the verdict flag and sentence.
-    """
-    from ..plotting import figures as plotting
-
-    say = _progress(quiet)
-    params = config.plant
+def _plant_section(doc: Document, s: Study) -> None:
+    params, summ = s.config.plant, s.plant
     lu, iu = params.length_unit, params.input_unit
-    # every check that can end in an `error:` line comes before the first progress line
-    require_bounded(params, allow_unbounded)
-    dt, env = _require(config, allow_unbounded=allow_unbounded)
-    if config.gains is not None:
-        check_gains(params, config.gains)
-    if config.sweep is not None:
-        sweep_box(config)  # [sweep] needs a usable [uncertainty] box: say so now
-        try:
-            check_samples(config.sweep["samples"], len(config.sweep["observers"]))
-        except InputError as err:
-            raise ConfigError(f"{config.source or 'config'}: [sweep] samples: {err}") from None
-    figs = out / "figures"
-    figs.mkdir(parents=True, exist_ok=True)
-
-    say("certifying the configured gains and synthesising a certified set")
-    cert_doc, configured, synth = certificate_document(config, allow_unbounded=allow_unbounded)
-    v = env.udot_max
-    g_loop = config.gains if config.gains is not None else synth.gains
-    tuning = digital_tuning(params, dt)
-    say("simulating the tracking loop at the envelope (PHSO, ESO and PHDO)")
-    runs = tracking_runs(config, gains=g_loop, tuning=tuning, allow_unbounded=allow_unbounded)
-    ok, verdict = _verdict(config, configured, synth, v, cert_doc["input"], runs)
-
-    doc = Document(f"Certified-gains report: {params.name or Path(config.source).stem}")
-    doc.verdict(verdict, ok)
-    top = len(doc.blocks)  # the summary goes here once every section is computed
-    doc.para(
-        f"Generated by `bwdesign report` from `{Path(config.source).name}`; do not edit. "
-        "Every number below is computed from that file."
-    )
-
-    # -- plant ---------------------------------------------------------------
-    summ = plant_summary(params)
     doc.heading("Plant")
     units = {
         "a1": "1/s^2",
@@ -417,19 +129,20 @@ def build_report(
     if params.physical is not None:
         for k in ("m", "b", "k", "d", "alpha0"):
             rows.append([k, f"{getattr(params.physical, k):.8g}", "physical"])
-    d = summ["derived"]
     rows += [
-        ["natural frequency sqrt(a1)/(2 pi)", f"{d['natural_frequency_hz']:.6g}", "Hz"],
-        ["damping ratio a2/(2 sqrt(a1))", f"{d['damping_ratio']:.4g}", "-"],
-        ["static gain a3/a1", f"{d['static_gain']:.6g}", d["static_gain_unit"]],
+        ["natural frequency sqrt(a1)/(2 pi)", f"{summ.natural_frequency_hz:.6g}", "Hz"],
+        ["damping ratio a2/(2 sqrt(a1))", f"{summ.damping_ratio:.4g}", "-"],
+        ["static gain a3/a1", f"{summ.static_gain:.6g}", summ.static_gain_unit],
     ]
     doc.table(["quantity", "value", "unit"], rows)
-    bc = summ["bounded_class"]
-    doc.para(f"Bounded class: **{'yes' if bc['bounded'] else 'no'}**. {bc['reason']}.")
-    if "note" in summ:
-        doc.para(summ["note"])
+    doc.para(f"Bounded class: **{'yes' if summ.bounded else 'no'}**. {summ.bounded_reason}.")
+    if summ.note is not None:
+        doc.para(summ.note)
 
-    # -- envelope ------------------------------------------------------------
+
+def _envelope_section(doc: Document, s: Study) -> None:
+    config, env, inp = s.config, s.envelope, s.input
+    iu, v, dt = config.plant.input_unit, s.envelope.udot_max, float(config.dt)
     doc.heading("Operating envelope")
     erows = [
         ["|u'| bound used by the certificates", f"{v:.6g} {iu}/s"],
@@ -443,17 +156,16 @@ def build_report(
             ["leading order (a1/a3) max |x_d'|", f"{env.leading_order:.6g} {iu}/s"],
             ["margin", f"{env.margin:g}"],
         ]
-    inp = cert_doc["input"]
-    need = inp["feedforward_range"]
+    need = inp.feedforward
     erows += [
         [
             "feedforward input range (exact inverse)",
             "-" if need is None else f"{need[0]:.4g} .. {need[1]:.4g} {iu}",
         ],
-        ["input limits ([controller] u_min, u_max)", _limits_text(inp["limits"], iu)],
+        ["input limits ([controller] u_min, u_max)", limits_text(inp.limits, iu)],
         [
             "feedforward within the limits",
-            "-" if inp["within_limits"] is None else _fmt(inp["within_limits"]),
+            "-" if inp.within_limits is None else fmt(inp.within_limits),
         ],
     ]
     doc.table(["item", "value"], erows)
@@ -462,23 +174,32 @@ def build_report(
         f"|u'| dt = {v * dt:.4g} {iu}."
     )
 
-    # -- certificates ----------------------------------------------------------
+
+def _decays(s: Study) -> tuple[float, float]:
+    """The decays the configured and the synthesised gains are certified at (1/s)."""
+    synth = s.synthesis.result
+    c_decay = 0.0 if s.configured is None else s.configured.decay
+    s_decay = synth.report.decay if synth.report is not None else s.synthesis.decay
+    return c_decay, s_decay
+
+
+def _certificates_section(doc: Document, s: Study) -> None:
+    config, configured, synth = s.config, s.configured, s.synthesis.result
+    iu = config.plant.input_unit
     doc.heading("Certificates")
-    req = _synthesis_request(config)
-    c_decay = 0.0 if configured is None else configured.decay
-    s_decay = synth.report.decay if synth.report is not None else req["decay"]
+    c_decay, s_decay = _decays(s)
     doc.para(
-        f"Configured gains l = {_gains_text(config.gains)}; synthesised gains "
-        f"l = {_gains_text(synth.gains)} (discrete K = {_gains_text(synth.discrete_gains)}), "
-        f"from an LMI synthesis for the {synth.tier} tier asking decay >= {req['decay']:g} 1/s"
-        f" within pole radius {synth.pole_radius:.5g} rad/s. Envelope = the largest |u'| "
-        f"({iu}/s) the tier certifies for those gains with at least the decay named in the "
-        "column head; decay = certified exponential rate (1/s) at the envelope above; "
-        "check = the smallest slack of the eigenvalue checks made outside the solver "
-        "(scaled, > 0 passes). The two sets are certified at different required decays "
-        f"(configured: >= {c_decay:g} 1/s; synthesised: >= {s_decay:g} 1/s, the synthesis "
-        "request), so their envelopes answer different questions: a larger required decay "
-        "certifies a smaller envelope."
+        f"Configured gains l = {gains_text(config.gains)}; synthesised gains "
+        f"l = {gains_text(synth.gains)} (discrete K = {gains_text(synth.discrete_gains)}), "
+        f"from an LMI synthesis for the {synth.tier} tier asking decay >= "
+        f"{s.synthesis.decay:g} 1/s within pole radius {synth.pole_radius:.5g} rad/s. "
+        f"Envelope = the largest |u'| ({iu}/s) the tier certifies for those gains with at "
+        "least the decay named in the column head; decay = certified exponential rate (1/s) "
+        "at the envelope above; check = the smallest slack of the eigenvalue checks made "
+        "outside the solver (scaled, > 0 passes). The two sets are certified at different "
+        f"required decays (configured: >= {c_decay:g} 1/s; synthesised: >= {s_decay:g} 1/s, "
+        "the synthesis request), so their envelopes answer different questions: a larger "
+        "required decay certifies a smaller envelope."
     )
     header = [
         "tier",
@@ -500,52 +221,30 @@ def build_report(
         t1 = configured.tier("theorem1")
         doc.para(f"Theorem 1 for the configured gains: {t1.status}.")
 
-    # -- synthesis per tier ----------------------------------------------------
-    say("synthesis per tier (the largest envelope synthesised gains reach)")
-    per_tier = synthesize_per_tier(
-        params,
-        udot_max=v,
-        decay=req["decay"],
-        dt=dt,
-        pole_radius=req["pole_radius"],
-        allow_unbounded=allow_unbounded,
-    )
-    cert_doc["tier_synthesis"] = tier_synthesis_section(doc, params, per_tier, v)
 
-    # -- linear analysis -----------------------------------------------------
-    say("linear analysis of the observer error dynamics")
+def _error_dynamics_section(doc: Document, s: Study, figs: Path, plotting: Any) -> None:
+    params = s.config.plant
+    iu, v = params.input_unit, s.envelope.udot_max
     doc.heading("Observer error dynamics")
-    sets = {}
-    if config.gains is not None:
-        sets["configured"] = config.gains
-    if synth.gains is not None:
-        sets["synthesised"] = synth.gains
     prow = []
     poles_by_label = {}
-    bodes = {}
-    for label, g in sets.items():
-        ed = error_dynamics(params, g, udot_max=v)
+    for gs in s.error_dynamics:
+        ed = gs.dynamics
         for k, p, z in zip(ed.k_interval, ed.poles, ed.damping, strict=True):
-            prow.append(
-                [
-                    label,
-                    f"{k:.4g}",
-                    ", ".join(_pole_text(x) for x in p),
-                    ", ".join(f"{x:.3f}" for x in z),
-                ]
-            )
-            poles_by_label[f"{label}, k = {k:.3g}"] = p
-        bodes[label] = hysteresis_bode(params, g)
+            poles = ", ".join(_pole_text(x) for x in p)
+            prow.append([gs.label, f"{k:.4g}", poles, ", ".join(f"{x:.3f}" for x in z)])
+            poles_by_label[f"{gs.label}, k = {k:.3g}"] = p
+    bodes = {gs.label: gs.bode for gs in s.error_dynamics}
     doc.table(["gains", "k (1/s)", "poles of A - k e3 e3' (1/s)", "damping"], prow)
     fig, _ = plotting.plot_error_poles(poles_by_label, title="observer error poles")
     plotting.save_figure(fig, figs / "error_poles.png")
-    doc.figure("figures/error_poles.png", "Observer error poles at both ends of the sector")
+    doc.figure(f"{figs.name}/error_poles.png", "Observer error poles at both ends of the sector")
     fig, _ = plotting.plot_hysteresis_bode(
         bodes, lipschitz_coeff=abs(params.beta) + abs(params.gamma), udot_max=v, input_unit=iu
     )
     plotting.save_figure(fig, figs / "hysteresis_bode.png")
     doc.figure(
-        "figures/hysteresis_bode.png",
+        f"{figs.name}/hysteresis_bode.png",
         "Bode magnitude from the hysteresis error to eps3; its peak sets the lipschitz "
         "envelope 1/((|beta| + |gamma|) peak)",
     )
@@ -556,38 +255,36 @@ def build_report(
             for k, b in bodes.items()
         )
         + f". These are decay-0 bounds: the certificate table's synthesised column asks decay "
-        f">= {s_decay:g} 1/s, which certifies a smaller envelope."
+        f">= {_decays(s)[1]:g} 1/s, which certifies a smaller envelope."
     )
 
-    # -- tracking loop -------------------------------------------------------
-    say("tracking-loop analysis (continuous, sampled, digital tuning)")
-    ctl = config.controller
+
+def _loop_section(doc: Document, s: Study, figs: Path, plotting: Any) -> None:
+    loop, tuning, dt = s.loop, s.tuning, float(s.config.dt)
     doc.heading("Tracking loop")
-    cont = analyze_loop(params, ctl.lambda1, ctl.lambda2, g_loop)
-    samp = analyze_loop(params, ctl.lambda1, ctl.lambda2, g_loop, dt=dt)
     lrow = []
     for label, a in (
-        ("eq. 12, continuous", cont),
-        ("eq. 12, sampled at dt", samp),
+        ("eq. 12, continuous", loop.continuous),
+        ("eq. 12, sampled at dt", loop.sampled),
         ("digital tuning (discrete form), sampled", tuning.nominal),
     ):
         lrow.append(
             [
                 label,
-                _fmt(a.stable),
-                _fmt(a.max_real_part),
-                _fmt(a.spectral_radius, 8) if a.spectral_radius is not None else "-",
-                _fmt(a.gain_margin_db, 3),
-                _fmt(a.phase_margin, 3),
-                _fmt(a.delay_margin * 1e3, 3),
+                fmt(a.stable),
+                fmt(a.max_real_part),
+                fmt(a.spectral_radius, 8) if a.spectral_radius is not None else "-",
+                fmt(a.gain_margin_db, 3),
+                fmt(a.phase_margin, 3),
+                fmt(a.delay_margin * 1e3, 3),
             ]
         )
     doc.para(
-        f"Configured constants lambda1 = {ctl.lambda1:g}, lambda2 = {ctl.lambda2:g} "
-        f"with observer gains {_gains_text(g_loop)}; the digital tuning chooses "
+        f"Configured constants lambda1 = {loop.lambda1:g}, lambda2 = {loop.lambda2:g} "
+        f"with observer gains {gains_text(loop.gains)}; the digital tuning chooses "
         f"lambda1 = {tuning.lambda1:.4g}, lambda2 = {tuning.lambda2:.4g}, integral rate "
-        f"{_fmt(tuning.integral_rate)} 1/s and observer gains "
-        f"{_gains_text(tuning.gains)} for dt = {dt * 1e3:g} ms."
+        f"{fmt(tuning.integral_rate)} 1/s and observer gains "
+        f"{gains_text(tuning.gains)} for dt = {dt * 1e3:g} ms."
     )
     doc.table(
         [
@@ -610,53 +307,106 @@ def build_report(
         f"{'yes' if tuning.met else 'no'}. {tuning.reasoning}"
     )
     fig, _ = plotting.plot_loop_poles(
-        {"eq. 12 sampled": samp, "digital tuning": tuning.nominal},
+        {"eq. 12 sampled": loop.sampled, "digital tuning": tuning.nominal},
         title="tracking loop poles (z-plane)",
     )
     plotting.save_figure(fig, figs / "loop_poles.png")
-    doc.figure("figures/loop_poles.png", "Closed-loop poles of the sampled tracking loops")
+    doc.figure(f"{figs.name}/loop_poles.png", "Closed-loop poles of the sampled tracking loops")
 
-    # -- simulation ----------------------------------------------------------
-    tracking_section(doc, config, runs, figs)
-    if config.sweep is not None:
-        say(f"Monte Carlo sweep over [uncertainty]: {config.sweep['samples']} scenarios")
-        cert_doc["sweep"] = sweep_section(doc, config, figs)
-    if config.uncertainty is not None and not config.uncertainty.undetermined():
-        say("robust certificate over [uncertainty] (every corner)")
-        cert_doc["robust"] = robust_section(doc, config, tuning, v)
 
-    # -- firmware ------------------------------------------------------------
+def _firmware_section(doc: Document, s: Study) -> None:
+    fw, gains = s.firmware, s.config.gains
     doc.heading("Gains for firmware")
-    fw = cert_doc["firmware"]
-    lines = [f"# discrete observer gains at dt = {dt!r} s: x_post = x_prior + K*(z - x_prior[0])"]
-    if "configured_K" in fw:
-        lines.append(f"K_configured  = {fw['configured_K']!r}")
-    if "synthesized_K" in fw:
-        lines.append(f"K_synthesised = {fw['synthesized_K']!r}")
-    if config.gains is not None:
-        K = discrete_gains(params, config.gains, dt)
-        lines.append(f"# check: pole matching of l = {list(config.gains)!r} gives {K.tolist()!r}")
+    lines = [
+        f"# discrete observer gains at dt = {fw.dt!r} s: x_post = x_prior + K*(z - x_prior[0])"
+    ]
+    if fw.configured_K is not None:
+        lines.append(f"K_configured  = {list(fw.configured_K)!r}")
+    if fw.synthesized_K is not None:
+        lines.append(f"K_synthesised = {list(fw.synthesized_K)!r}")
+    if gains is not None:
+        lines.append(
+            f"# check: pole matching of l = {list(gains)!r} gives {list(fw.pole_matched)!r}"
+        )
     doc.pre("\n".join(lines))
 
-    # -- reproducibility -----------------------------------------------------
+
+def _reproducibility_section(
+    doc: Document, s: Study, date: str | None, out_dir: str | Path | None
+) -> None:
+    config = s.config
     doc.heading("Reproducibility")
-    ver = _versions()
     doc.table(
         ["item", "value"],
-        [[k, v_] for k, v_ in ver.items()]
+        [[k, v_] for k, v_ in s.versions.items()]
         + [
             ["solvers", "Clarabel (fallback SCS); only OPTIMAL is accepted"],
             ["config", Path(config.source).name],
             ["config sha256", config.sha256],
-            ["command", _command(config, out_dir, allow_unbounded)],
+            ["command", _command(config, out_dir, s.allow_unbounded)],
         ],
     )
     doc.para(f"Date: {date or datetime.now(UTC).strftime('%Y-%m-%d %H:%M UTC')}")
-    summary = ReportSummary(
-        config, ok, configured, synth, env, runs, tuning, inp, cert_doc.get("robust")
+
+
+def render(
+    study: Study,
+    figures_dir: str | Path,
+    *,
+    date: str | None = None,
+    out_dir: str | Path | None = None,
+) -> Document:
+    """The report of ``study``; its figures are drawn into ``figures_dir``.
+
+    Parameters
+    ----------
+    study : Study
+        With every part the report shows (:data:`bwdesign.study.REPORT_PARTS`).
+    figures_dir : path
+        Where the figures are written (created); the document refers to them as
+        ``<its name>/<figure>.png``, relative to its parent (the report's directory).
+    date : str, optional
+        The Date line (default: now, UTC).
+    out_dir : path, optional
+        The report's directory as the user named it, for the reproducibility
+        command's ``--out`` (``DIR`` when unknown).
+
+    Raises
+    ------
+    InputError
+        ``study`` lacks a part the report shows.
+    """
+    from ..plotting import figures as plotting
+
+    if not isinstance(study, Study):
+        raise InputError(f"study must be a bwdesign Study, got {type(study).__name__}")
+    missing = sorted(REPORT_PARTS - study.parts)
+    if missing:
+        raise InputError(f"the report needs the study's part(s) {', '.join(missing)}")
+    figs = Path(figures_dir)
+    figs.mkdir(parents=True, exist_ok=True)
+    doc = Document(f"Certified-gains report: {study.name}")
+    doc.verdict(study.verdict.text, study.verdict.ok)
+    top = len(doc.blocks)  # the summary goes here
+    doc.para(
+        f"Generated by `bwdesign report` from `{Path(study.config.source).name}`; do not edit. "
+        "Every number below is computed from that file."
     )
-    doc.insert(top, summary_block(summary))
-    return doc, cert_doc, ok, verdict
+    _plant_section(doc, study)
+    _envelope_section(doc, study)
+    _certificates_section(doc, study)
+    tier_synthesis_section(doc, study)
+    _error_dynamics_section(doc, study, figs, plotting)
+    _loop_section(doc, study, figs, plotting)
+    tracking_section(doc, study, figs)
+    if study.sweep is not None:
+        sweep_section(doc, study, figs)
+    if study.robust is not None:
+        robust_section(doc, study)
+    _firmware_section(doc, study)
+    _reproducibility_section(doc, study, date, out_dir)
+    doc.insert(top, summary_block(study))
+    return doc
 
 
 def _command(config: StageConfig, out_dir: str | Path | None, allow_unbounded: bool) -> str:
@@ -682,6 +432,25 @@ def _pole_text(p: complex) -> str:
     if abs(p.imag) < 1e-9 * max(1.0, abs(p)):
         return f"{p.real:.4g}"
     return f"{p.real:.4g}{p.imag:+.4g}j"
+
+
+def build_report(
+    config: StageConfig,
+    out: Path,
+    *,
+    allow_unbounded: bool = False,
+    quiet: bool = False,
+    date: str | None = None,
+    out_dir: str | Path | None = None,
+) -> tuple[Document, Study]:
+    """Compute the study of ``config`` and render it, figures into ``out / "figures"``.
+
+    ``out_dir``: the report's directory as the user named it (``out`` may be a
+    staging folder inside it), for the reproducibility command's ``--out``.
+    Progress lines (``[report] ...``) go to stderr unless ``quiet``.
+    """
+    s = study(config, allow_unbounded=allow_unbounded, progress=_progress(quiet))
+    return render(s, Path(out) / "figures", date=date, out_dir=out_dir), s
 
 
 def write_report(
@@ -731,7 +500,7 @@ def write_report(
         out_dir, command="report", force=force, what="--out", expect=REPORT_FILES
     )
     with target.stage() as stage:
-        doc, cert_doc, ok, verdict = build_report(
+        doc, s = build_report(
             config,
             stage.root,
             allow_unbounded=allow_unbounded,
@@ -739,7 +508,7 @@ def write_report(
             date=date,
             out_dir=out_dir,
         )
-        stage.write_text("certificate.json", dump_json(cert_doc) + "\n")
+        stage.write_text("certificate.json", dump_json(s.to_dict()) + "\n")
         stage.write_text("report.md", doc.to_markdown())
         stage.write_text("report.html", doc.to_html(stage.root))
-    return ReportOutcome(out_dir=Path(out_dir), certified=ok, verdict=verdict)
+    return ReportOutcome(out_dir=Path(out_dir), certified=s.verdict.ok, verdict=s.verdict.text)

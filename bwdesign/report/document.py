@@ -10,30 +10,12 @@ from __future__ import annotations
 
 import base64
 import html
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
-import numpy as np
+from ..output.text import fmt
 
 __all__ = ["Document", "fmt"]
-
-
-def fmt(x: Any, digits: int = 4) -> str:
-    """A table cell: ``digits`` significant digits, "-" for None/NaN, "unbounded" for +inf."""
-    if x is None:
-        return "-"
-    if isinstance(x, bool):
-        return "yes" if x else "no"
-    if isinstance(x, float | int | np.floating):
-        x = float(x)
-        if math.isinf(x):
-            return "unbounded" if x > 0 else "-inf"
-        if math.isnan(x):
-            return "-"
-        return f"{x:.{digits}g}"
-    return str(x)
 
 
 @dataclass

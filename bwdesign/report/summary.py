@@ -1,85 +1,47 @@
 """The summary block at the top of the certified-gains report.
 
 Four rows a person reads first: the verdict, the envelope, the tracking error
-of the recommended loop and what to export. Every number in them is one the
-report computed for its sections (the certificates, the envelope, the tracking
-runs, the digital tuning, the robust section); nothing is recomputed here.
-
-The recommended loop is the digital tuning (the law tuned for the sample time,
-with worst-case margins checked over its model mismatch) when its requirements
-are met and its PHSO run stays bounded, else eq. 12 with the configured
-constants; always with the PHSO, the observer the certificates are about and
-the one ``bwdesign export-c`` exports by default.
+of the recommended loop and what to export. Every number in them is one of the
+study's (the certificates, the envelope, the tracking runs, the digital tuning,
+the robust section); nothing is computed here. The recommended loop is the
+study's :attr:`~bwdesign.study.Study.recommendation`
+(:func:`bwdesign.study.verdict.recommend`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
+from ..output.text import gains_text
+from ..study import Study
 from .document import Document, fmt
 
-__all__ = ["ReportSummary", "summary_block"]
+__all__ = ["summary_block"]
 
 
-@dataclass(frozen=True)
-class ReportSummary:
-    """What the summary block is built from (all of it computed by the report).
-
-    Attributes
-    ----------
-    config : StageConfig
-    ok : bool
-        The report's verdict flag (its exit code).
-    configured : CertificateReport or None
-    synth : SynthesisResult
-    envelope : Envelope
-    runs : list of TrackingRun
-    tuning : DigitalTuning
-    input_doc : dict
-        ``certificate.json``'s ``input`` entry (``within_limits``).
-    robust : dict or None
-        ``certificate.json``'s ``robust`` entry, when the report has that section.
-    """
-
-    config: Any
-    ok: bool
-    configured: Any
-    synth: Any
-    envelope: Any
-    runs: list
-    tuning: Any
-    input_doc: dict
-    robust: dict | None = None
-
-
-def _gains(g: Any) -> str:
-    return "(" + ", ".join(f"{float(v):.6g}" for v in g) + ")"
-
-
-def _verdict_row(s: ReportSummary) -> str:
-    c, synth = s.configured, s.synth
-    head = "**CERTIFIED**" if s.ok else "**NOT CERTIFIED**"
+def _verdict_row(s: Study) -> str:
+    c, synth = s.configured, s.synthesis.result
+    head = "**CERTIFIED**" if s.verdict.ok else "**NOT CERTIFIED**"
     if c is not None and c.certified:
-        why = f"the configured gains {_gains(s.config.gains)} (strongest tier: {c.best})"
+        why = f"the configured gains {gains_text(s.config.gains)} (strongest tier: {c.best})"
     elif c is not None:
-        why = f"no tier certifies the configured gains {_gains(s.config.gains)}"
+        why = f"no tier certifies the configured gains {gains_text(s.config.gains)}"
     elif synth.feasible:
         why = (
-            f"no gains configured; the synthesised gains {_gains(synth.gains)} ({synth.tier} tier)"
+            f"no gains configured; the synthesised gains {gains_text(synth.gains)} "
+            f"({synth.tier} tier)"
         )
     else:
         why = "no gains configured"
     if not synth.feasible:
         why += "; synthesis infeasible"
-    if s.input_doc.get("within_limits") is False:
+    if s.input.within_limits is False:
         why += "; the reference's feedforward input leaves the input limits"
     return f"{head}: {why}"
 
 
-def _envelope_row(s: ReportSummary) -> str:
+def _envelope_row(s: Study) -> str:
     env, iu = s.envelope, s.config.plant.input_unit
     dt = float(s.config.dt)
     if env.source == "reference" and env.derived is not None:
@@ -100,18 +62,8 @@ def _envelope_row(s: ReportSummary) -> str:
     return text
 
 
-def _recommended(s: ReportSummary) -> tuple[str | None, Any]:
-    """(law, PHSO run) of the recommended loop, or (None, None)."""
-    phso = {r.label: r for r in s.runs if r.label.startswith("PHSO")}
-    digital, eq12 = phso.get("PHSO (digital tuning)"), phso.get("PHSO (eq. 12)")
-    if s.tuning.met and digital is not None and digital.result.metrics is not None:
-        return "digital tuning", digital
-    if eq12 is not None and eq12.result.metrics is not None:
-        return "eq. 12", eq12
-    return None, None
-
-
-def _tracking_row(s: ReportSummary, law: str | None, run: Any) -> str:
+def _tracking_row(s: Study) -> str:
+    law, run = s.recommendation.law, s.recommendation.run
     lu = s.config.plant.length_unit
     if run is None:
         return "no loop stays bounded in the simulation (see Simulated tracking)"
@@ -130,7 +82,7 @@ def _tracking_row(s: ReportSummary, law: str | None, run: Any) -> str:
         f"over {w0:.3g} .. {w1:.3g} s, nominal plant"
     )
     other = next(
-        (r for r in s.runs if r.label.startswith("PHSO") and r is not run),
+        (r for r in s.tracking if r.label.startswith("PHSO") and r is not run),
         None,
     )
     if other is not None:
@@ -141,32 +93,33 @@ def _tracking_row(s: ReportSummary, law: str | None, run: Any) -> str:
         )
         name = "eq. 12 with the configured constants" if law != "eq. 12" else "digital tuning"
         text += f" ({name}: {what})"
-    rob = (s.robust or {}).get("observers", {}).get("phso")
+    rob = None if s.robust is None else s.robust.loop("phso")
     if law == "digital tuning" and rob is not None:
-        cert = rob["certificate"]
-        if cert["holds"] and cert["tracking_bound"] is not None:
+        cert = rob.certificate
+        if cert.holds and cert.tracking_bound is not None:
             text += (
                 f"; certified over the [uncertainty] box: steady max |x1 - x_d| <= "
-                f"{fmt(cert['tracking_bound'], 3)} {lu}"
+                f"{fmt(cert.tracking_bound, 3)} {lu}"
             )
         else:
             text += "; not certified over the [uncertainty] box (see the robust section)"
     return text
 
 
-def _export_row(s: ReportSummary, law: str | None) -> str:
+def _export_row(s: Study) -> str:
+    law = s.recommendation.law
     name = Path(s.config.source).name
     cmd = f"bwdesign export-c --config {name} --out fw"
     iu, v = s.config.plant.input_unit, s.envelope.udot_max
-    c, synth = s.configured, s.synth
+    c, synth = s.configured, s.synthesis.result
     synth_text = (
-        f"`{cmd} --synthesize`: the synthesised gains {_gains(synth.gains)}, certified at "
-        f"|u'| <= {v:.4g} {iu}/s, discrete K = {_gains(synth.discrete_gains)}"
+        f"`{cmd} --synthesize`: the synthesised gains {gains_text(synth.gains)}, certified at "
+        f"|u'| <= {v:.4g} {iu}/s, discrete K = {gains_text(synth.discrete_gains)}"
         if synth.feasible
         else ""
     )
-    if not s.ok:
-        if s.input_doc.get("within_limits") is False:
+    if not s.verdict.ok:
+        if s.input.within_limits is False:
             return (
                 "nothing yet: the reference needs more input than [controller] u_min/u_max "
                 "allow; change the reference or the limits first"
@@ -178,26 +131,25 @@ def _export_row(s: ReportSummary, law: str | None) -> str:
         t = s.tuning
         return (
             f"`{cmd} --tuning digital`: the digital tuning's observer gains "
-            f"{_gains(t.gains)} and constants lambda1 = {t.lambda1:.4g}, lambda2 = "
+            f"{gains_text(t.gains)} and constants lambda1 = {t.lambda1:.4g}, lambda2 = "
             f"{t.lambda2:.4g}, integral rate {fmt(t.integral_rate)} 1/s; export-c writes "
             f"them only when a tier certifies those gains at |u'| <= {v:.4g} {iu}/s (exit 1 "
             "otherwise)"
         )
     if c is not None:
-        return f"`{cmd}`: the configured gains, discrete K = {_gains(c.discrete_gains)}"
+        return f"`{cmd}`: the configured gains, discrete K = {gains_text(c.discrete_gains)}"
     return synth_text
 
 
-def summary_block(summary: ReportSummary) -> Document:
+def summary_block(study: Study) -> Document:
     """The summary as a document of its own, for :meth:`Document.insert` at the top."""
-    law, run = _recommended(summary)
     doc = Document("")
     doc.summary(
         [
-            ["verdict", _verdict_row(summary)],
-            ["envelope", _envelope_row(summary)],
-            ["tracking (recommended loop)", _tracking_row(summary, law, run)],
-            ["export", _export_row(summary, law)],
+            ["verdict", _verdict_row(study)],
+            ["envelope", _envelope_row(study)],
+            ["tracking (recommended loop)", _tracking_row(study)],
+            ["export", _export_row(study)],
         ]
     )
     return doc

@@ -11,74 +11,12 @@ import numpy as np
 
 from ..output.files import DirectoryTarget
 from ..sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, RowReplay, replay_row
-from ..sim.sweep import SweepSpec, draw_scenarios, run_sweep, spec_from_config
+from ..sim.sweep import SweepSpec
+from ..study import Study
+from ..study.sweep import sweep_summary
 from .document import Document
 
-__all__ = ["sweep_document", "sweep_summary", "sweep_section", "write_sweep"]
-
-QUANTILES = (0.5, 0.9, 0.99)
-
-
-def sweep_summary(
-    table: Mapping[str, np.ndarray], *, udot_max: float | None = None
-) -> dict[str, Any]:
-    """Per observer: scenario count, fraction unstable, quantiles and max of each metric.
-
-    With the envelope ``udot_max`` the loop's certificate assumed and the table's
-    ``within_envelope`` column: ``outside_envelope`` (stable scenarios whose input
-    rate left it), its fraction of all scenarios and ``worst_envelope_ratio``
-    (largest ``input_rate_max / udot_max``); None without an envelope.
-    """
-    out: dict[str, Any] = {}
-    for obs in dict.fromkeys(table["observer"].tolist()):
-        sel = table["observer"] == obs
-        stable = table["stable"][sel]
-        doc: dict[str, Any] = {
-            "scenarios": int(sel.sum()),
-            "unstable": int((~stable).sum()),
-            "fraction_unstable": float((~stable).mean()),
-        }
-        doc.update(_envelope_summary(table, sel, udot_max))
-        for m in ("me", "maxe", "rmse"):
-            v = table[m][sel][stable]
-            doc[m] = (
-                {f"p{round(q * 100)}": float(np.quantile(v, q)) for q in QUANTILES}
-                | {
-                    "max": float(v.max()),
-                    "worst_scenario": int(table["scenario"][sel][stable][v.argmax()]),
-                }
-                if v.size
-                else None
-            )
-        out[obs] = doc
-    return out
-
-
-def _envelope_summary(
-    table: Mapping[str, np.ndarray], sel: np.ndarray, udot_max: float | None
-) -> dict[str, Any]:
-    stable = table["stable"][sel]
-    rates = table["input_rate_max"][sel][stable] if "input_rate_max" in table else np.array([])
-    doc: dict[str, Any] = {
-        "input_rate_max": (
-            {
-                "max": float(rates.max()),
-                "worst_scenario": int(table["scenario"][sel][stable][rates.argmax()]),
-            }
-            if rates.size
-            else None
-        ),
-        "udot_max": udot_max,
-        "outside_envelope": None,
-        "fraction_outside_envelope": None,
-        "worst_envelope_ratio": None,
-    }
-    if udot_max is not None and "within_envelope" in table:
-        outside = stable & ~table["within_envelope"][sel]
-        doc["outside_envelope"] = int(outside.sum())
-        doc["fraction_outside_envelope"] = float(outside.mean())
-        doc["worst_envelope_ratio"] = float(rates.max() / udot_max) if rates.size else None
-    return doc
+__all__ = ["sweep_document", "sweep_section", "write_sweep"]
 
 
 def _quantile_table(doc: Document, summary: Mapping[str, Any]) -> None:
@@ -105,47 +43,35 @@ def _quantile_table(doc: Document, summary: Mapping[str, Any]) -> None:
     doc.table(header, body)
 
 
-def sweep_section(doc: Document, config: Any, figs: Path) -> dict[str, Any]:
-    """The certified-gains report's ``[sweep]`` section: a small sweep over ``[uncertainty]``.
+def sweep_section(doc: Document, study: Study, figs: Path) -> None:
+    """The certified-gains report's ``[sweep]`` section (:attr:`Study.sweep`).
 
-    Runs in this process (no Dask); returns the summary for ``certificate.json``.
+    The histogram figure is written into ``figs``.
     """
     from ..plotting import figures as plotting
     from ..plotting.sweep import plot_sweep_histograms
 
-    cfg = config.sweep
-    spec = spec_from_config(
-        config,
-        tuning=cfg.get("tuning", "config"),
-        observers=cfg.get("observers", ("phso", "eso")),
-        noise_std=cfg.get("noise_std_um", 0.0),
-        duration=cfg.get("duration_s"),
-    )
-    bounds = spec.box.check(spec.params)
-    seed, n = cfg.get("seed", 0), cfg["samples"]
-    dist = cfg.get("distribution", "uniform")
-    scenarios = draw_scenarios(spec.params, spec.box, n, seed=seed, distribution=dist)
-    table = run_sweep(spec, scenarios, chunk_size=n, workers=0)
-    summary = sweep_summary(table, udot_max=spec.udot_max)
+    part = study.sweep
+    spec, bounds, summary = part.spec, part.bounds, part.summary
+    seed, n, dist = part.seed, part.samples, part.distribution
     lu = spec.params.length_unit
     doc.heading("Robustness over the uncertainty box (Monte Carlo)")
+    box = ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in bounds.items())
     doc.para(
-        f"{n} scenarios drawn {dist} from the [uncertainty] box "
-        f"({spec.box.describe(spec.params)}), seed {seed}; the "
-        f"{cfg.get('tuning', 'config')} tuning, sensor noise {spec.noise_std:g} {lu}, "
+        f"{n} scenarios drawn {dist} from the [uncertainty] box ({box}), seed {seed}; the "
+        f"{part.tuning} tuning, sensor noise {spec.noise_std:g} {lu}, "
         f"{spec.duration:g} s per scenario, starting "
         f"{'on the reference' if spec.start == 'reference' else 'from rest'}; metrics over "
         "the last two "
         "reference periods. The same sweep, larger: `bwdesign sweep --config "
-        f"{Path(config.source).name} --samples N --seed {seed} --tuning "
-        f"{cfg.get('tuning', 'config')} --noise-std {spec.noise_std:g} --out DIR`."
+        f"{Path(study.config.source).name} --samples N --seed {seed} --tuning "
+        f"{part.tuning} --noise-std {spec.noise_std:g} --out DIR`."
     )
     _quantile_table(doc, summary)
     _envelope_para(doc, spec, summary, n, replays=False)
-    fig, _ = plot_sweep_histograms(dict(table), length_unit=lu, title="stable scenarios")
+    fig, _ = plot_sweep_histograms(dict(part.table), length_unit=lu, title="stable scenarios")
     plotting.save_figure(fig, figs / "sweep_histograms.png")
-    doc.figure("figures/sweep_histograms.png", f"ME, MAXE and RMSE ({lu}) over the scenarios")
-    return {"samples": n, "seed": seed, "distribution": dist, "bounds": bounds, "summary": summary}
+    doc.figure(f"{figs.name}/sweep_histograms.png", f"ME, MAXE and RMSE ({lu}) over the scenarios")
 
 
 def sweep_document(

@@ -1,12 +1,20 @@
 """The checks behind ``bwdesign check``, the pytest helpers and the pytest plugin.
 
-Each check computes a number from the stage and compares it with a limit, giving a
-:class:`Check` (name, passed, value, limit, one-line text). The loop that the
-tracking and margin checks use is the stage's own: eq. (12) with the
-``[controller]`` constants, as printed, run at ``[sampling] dt`` on the PHSO (or
-``observer``) with the ``[observer]`` gains; the tracking run starts on the
-reference as the report's runs do (or from rest), follows ``[reference]`` and takes
-its metrics over the last two reference periods.
+Each check reads a number from the stage's computed study (:func:`bwdesign.study.study`,
+the parts its requirements name) and compares it with a limit, giving a
+:class:`Check` (name, passed, value, limit, one-line text):
+
+- ``certified``, ``min_decay``: the study's ``configured`` certificate (the report's);
+- ``max_me_um``, ``max_maxe_um``: its ``corner_tracking``, eq. (12) with the
+  ``[controller]`` constants at ``[sampling] dt`` on the PHSO (or ``observer``) with
+  the ``[observer]`` gains, on the nominal plant and every ``[uncertainty]`` corner,
+  starting on the reference as the report's runs do (or from rest), metrics over the
+  last two reference periods;
+- ``min_gain_margin_db``, ``min_phase_margin_deg``: its ``loop`` analysis at dt (the
+  report's "eq. 12, sampled at dt" row);
+- synthesis: its ``synthesis``.
+
+:func:`check_requirements` computes one study for all of a file's requirements.
 """
 
 from __future__ import annotations
@@ -17,16 +25,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from ..certify.synthesis import synthesize
-from ..certify.tiers import certify
-from ..control.analysis import analyze_loop
-from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..errors import ConfigError, InputError
 from ..model.config import StageConfig, load_config
-from ..model.params import MODEL_FIELDS, PRESETS, BoucWenParams, preset
+from ..model.params import PRESETS, BoucWenParams, preset
 from ..model.requirements import REQUIREMENT_KEYS
 from ..observers.gains import hurwitz_violations
-from ..sim.batch import simulate_batch
+from ..study import Study, StudySettings, study
 
 __all__ = [
     "Check",
@@ -119,30 +123,9 @@ def _failed(config: StageConfig, name: str, limit: Any, why: str) -> Check:
     return Check(_name(config), name, False, None, limit, why)
 
 
-def check_certified(
-    config: StageConfig,
-    *,
-    gains: Any = None,
-    udot_max: float | None = None,
-    dt: float | None = None,
-    tier: str | None = None,
-    decay: float = 0.0,
-) -> Check:
-    """Are the gains certified at the envelope (by ``tier``, or by any tier)?"""
-    gains = config.gains if gains is None else gains
-    dt = config.dt if dt is None else dt
-    if udot_max is None and config.envelope_spec is not None:
-        udot_max = config.envelope().udot_max
-    _need(
-        config,
-        "the certificate check",
-        **{"[observer] gains": gains, "[envelope] (or udot_max)": udot_max},
-    )
-    why = _not_hurwitz(config, gains)
-    if why is not None:
-        c = _failed(config, "certified", tier or "any", f"no certificate: {why}")
-        return replace(c, details={"report": None, "decay_rate": 0.0})
-    rep = certify(config.plant, gains, udot_max=udot_max, dt=dt, decay=decay)
+def _certified(config: StageConfig, s: Study, tier: str | None, decay: float) -> Check:
+    """The ``certified`` check from the study's ``configured`` certificate."""
+    rep, udot_max = s.configured, s.envelope.udot_max
     holding = [c for c in rep.certificates if c.holds]
     if tier is not None:
         if tier not in [c.name for c in rep.certificates]:
@@ -182,6 +165,57 @@ def check_certified(
     )
 
 
+def _not_certified(config: StageConfig, tier: str | None, why: str) -> Check:
+    c = _failed(config, "certified", tier or "any", f"no certificate: {why}")
+    return replace(c, details={"report": None, "decay_rate": 0.0})
+
+
+def _need_certificate(config: StageConfig, gains: Any, udot_max: float | None) -> None:
+    _need(
+        config,
+        "the certificate check",
+        **{"[observer] gains": gains, "[envelope] (or udot_max)": udot_max},
+    )
+
+
+def _stage_envelope(config: StageConfig) -> float | None:
+    return None if config.envelope_spec is None else config.envelope().udot_max
+
+
+def check_certified(
+    config: StageConfig,
+    *,
+    gains: Any = None,
+    udot_max: float | None = None,
+    dt: float | None = None,
+    tier: str | None = None,
+    decay: float = 0.0,
+) -> Check:
+    """Are the gains certified at the envelope (by ``tier``, or by any tier)?
+
+    ``gains``, ``udot_max`` and ``dt`` default to the stage's; given, they replace its
+    ``[observer]``, ``[envelope]`` and ``[sampling]`` in the study.
+    """
+    if udot_max is None:
+        udot_max = _stage_envelope(config)
+        envelope = config.envelope_spec
+    else:
+        envelope = {"udot_max": udot_max}
+    gains = config.gains if gains is None else gains
+    _need_certificate(config, gains, udot_max)
+    why = _not_hurwitz(config, gains)
+    if why is not None:
+        return _not_certified(config, tier, why)
+    asked = replace(
+        config,
+        gains=tuple(gains),
+        dt=config.dt if dt is None else dt,
+        envelope_spec=envelope,
+    )
+    s = study(asked, parts={"configured"}, settings=StudySettings(decay=decay))
+    return _certified(config, s, tier, decay)
+
+
 def check_synthesis(
     config: StageConfig,
     *,
@@ -190,9 +224,18 @@ def check_synthesis(
     dt: float | None = None,
     pole_radius: float | None = None,
 ) -> Check:
-    """Does synthesis find certified gains for this envelope and decay?"""
-    dt = config.dt if dt is None else dt
-    syn = synthesize(config.plant, udot_max=udot_max, decay=decay, pole_radius=pole_radius, dt=dt)
+    """Does synthesis find certified gains for this envelope and decay?
+
+    The study's ``synthesis`` of the stage with ``[envelope] udot_max`` and
+    ``[synthesis] decay, pole_radius`` as given (``dt`` default the stage's).
+    """
+    asked = replace(
+        config,
+        dt=config.dt if dt is None else dt,
+        envelope_spec={"udot_max": udot_max},
+        synthesis={"decay": decay, "pole_radius": pole_radius},
+    )
+    syn = study(asked, parts={"synthesis"}).synthesis.result
     return Check(
         _name(config),
         "synthesis",
@@ -204,17 +247,55 @@ def check_synthesis(
     )
 
 
-def _true_plants(config: StageConfig, mismatch: Mapping[str, float] | None) -> list[BoucWenParams]:
-    p = config.plant
-    if mismatch is not None:
-        bad = sorted(set(mismatch) - set(MODEL_FIELDS))
-        if bad:
-            raise InputError(f"mismatch: unknown parameter(s) {bad}; parameters: {MODEL_FIELDS}")
-        return [replace(p, **{k: getattr(p, k) * (1 + float(v)) for k, v in mismatch.items()})]
-    box = getattr(config, "uncertainty", None)
-    if box is not None:
-        return [p, *box.vertices(p)]
-    return [p]
+def _need_tracking(config: StageConfig) -> None:
+    _need(
+        config,
+        "the tracking check",
+        **{
+            "[observer] gains": config.gains,
+            "[controller]": config.controller,
+            "[sampling] dt": config.dt,
+            "[reference]": config.reference,
+        },
+    )
+
+
+_TRACKING = (("max_me_um", "me", "ME"), ("max_maxe_um", "maxe", "MAXE"))
+
+
+def _tracking(config: StageConfig, s: Study, limits: Mapping[str, float | None]) -> list[Check]:
+    """The tracking checks from the study's ``corner_tracking``."""
+    part = s.corner_tracking
+    st, res = part.settings, part.result
+    if st.mismatch is not None:
+        where = "plant " + ", ".join(f"{k} {100 * float(v):+g} %" for k, v in st.mismatch.items())
+    else:
+        where = "nominal" if part.plants == 1 else f"worst of nominal and {part.plants - 1} corners"
+    lu = config.plant.length_unit
+    out = []
+    for name, column, label in _TRACKING:
+        limit = limits.get(name)
+        if limit is None:
+            continue
+        if not res.stable.all():
+            i = int(res.stable.argmin())
+            why = f"the loop is unstable on plant {i} ({res.status[i]})"
+            out.append(Check(_name(config), name, False, math.inf, limit, why))
+            continue
+        worst = float(getattr(res, column).max())
+        out.append(
+            Check(
+                _name(config),
+                name,
+                worst <= limit,
+                worst,
+                limit,
+                f"{label} {worst:.4g} {lu} ({where}, {st.observer.upper()}, noise "
+                f"{st.noise_std:g} {lu}, from {st.start}) "
+                f"{'<=' if worst <= limit else '>'} {limit:g}",
+            )
+        )
+    return out
 
 
 def check_tracking(
@@ -235,79 +316,34 @@ def check_tracking(
 
     The worst case over the nominal plant and, without ``mismatch``, every corner
     of the ``[uncertainty]`` box (when the stage has one); with ``mismatch``
-    (relative errors, e.g. ``{"a1": 0.02}``) the plant so perturbed.
+    (relative errors, e.g. ``{"a1": 0.02}``) the plant so perturbed. The study's
+    ``corner_tracking`` part.
     """
-    _need(
-        config,
-        "the tracking check",
-        **{
-            "[observer] gains": config.gains,
-            "[controller]": config.controller,
-            "[sampling] dt": config.dt,
-            "[reference]": config.reference,
-        },
-    )
+    _need_tracking(config)
+    limits = {"max_me_um": max_me, "max_maxe_um": max_maxe}
     why = _not_hurwitz(config, config.gains)
     if why is not None:
-        limits = (("max_me_um", max_me), ("max_maxe_um", max_maxe))
-        return [_failed(config, k, v, f"not simulated: {why}") for k, v in limits if v is not None]
-    period = config.reference.period
-    duration = duration or max(1.0, 3 * period if period else 1.0)
-    plants = _true_plants(config, mismatch)
-    if start not in ("reference", "rest"):
-        raise InputError(f"start must be 'reference' or 'rest', got {start!r}")
-    loop = ClosedLoop.from_config(
-        config, observer=observer, start=ON_REFERENCE if start == "reference" else Start()
+        return _not_simulated(config, limits, why)
+    settings = StudySettings(
+        observer=observer,
+        noise_std=noise_std,
+        duration=duration,
+        start=start,
+        mismatch=mismatch,
     )
-    res = simulate_batch(
-        loop, config.reference, plants, duration=duration, noise_std=noise_std, seeds=1
-    )
-    if mismatch is not None:
-        where = "plant " + ", ".join(f"{k} {100 * float(v):+g} %" for k, v in mismatch.items())
-    else:
-        where = "nominal" if len(plants) == 1 else f"worst of nominal and {len(plants) - 1} corners"
-    lu = config.plant.length_unit
-    out = []
-    for name, limit, values in (("max_me_um", max_me, res.me), ("max_maxe_um", max_maxe, res.maxe)):
-        if limit is None:
-            continue
-        if not res.stable.all():
-            i = int(res.stable.argmin())
-            out.append(
-                Check(
-                    _name(config),
-                    name,
-                    False,
-                    math.inf,
-                    limit,
-                    f"the loop is unstable on plant {i} ({res.status[i]})",
-                )
-            )
-            continue
-        worst = float(values.max())
-        label = "ME" if name == "max_me_um" else "MAXE"
-        out.append(
-            Check(
-                _name(config),
-                name,
-                worst <= limit,
-                worst,
-                limit,
-                f"{label} {worst:.4g} {lu} ({where}, {observer.upper()}, noise {noise_std:g} {lu}, "
-                f"from {start}) "
-                f"{'<=' if worst <= limit else '>'} {limit:g}",
-            )
-        )
-    return out
+    s = study(config, parts={"corner_tracking"}, settings=settings)
+    return _tracking(config, s, limits)
 
 
-def check_margins(
-    config: StageConfig,
-    *,
-    min_gain_margin_db: float | None = None,
-    min_phase_margin_deg: float | None = None,
+def _not_simulated(
+    config: StageConfig, limits: Mapping[str, float | None], why: str
 ) -> list[Check]:
-    """Gain and phase margins of the sampled loop (observer + eq. 12 at dt)."""
+    return [
+        _failed(config, k, v, f"not simulated: {why}") for k, v in limits.items() if v is not None
+    ]
+
+
+def _need_margins(config: StageConfig) -> None:
     _need(
         config,
         "the margin check",
@@ -317,79 +353,103 @@ def check_margins(
             "[sampling] dt": config.dt,
         },
     )
-    why = _not_hurwitz(config, config.gains)
-    if why is not None:
-        limits = (
-            ("min_gain_margin_db", min_gain_margin_db),
-            ("min_phase_margin_deg", min_phase_margin_deg),
-        )
-        return [_failed(config, k, v, f"not analysed: {why}") for k, v in limits if v is not None]
-    ctl = config.controller
-    loop = analyze_loop(config.plant, ctl.lambda1, ctl.lambda2, config.gains, dt=config.dt)
+
+
+def _margins(config: StageConfig, s: Study, gm: float | None, pm: float | None) -> list[Check]:
+    """The margin checks from the study's ``loop`` analysis at dt."""
+    loop = s.loop.sampled
     out = []
-    if min_gain_margin_db is not None:
+    if gm is not None:
         v = float(loop.gain_margin_db)
         out.append(
             Check(
                 _name(config),
                 "min_gain_margin_db",
-                v >= min_gain_margin_db,
+                v >= gm,
                 v,
-                min_gain_margin_db,
-                f"gain margin {v:.3g} dB {'>=' if v >= min_gain_margin_db else '<'} "
-                f"{min_gain_margin_db:g} dB (stable: {loop.stable})",
+                gm,
+                f"gain margin {v:.3g} dB {'>=' if v >= gm else '<'} {gm:g} dB "
+                f"(stable: {loop.stable})",
             )
         )
-    if min_phase_margin_deg is not None:
+    if pm is not None:
         v = float(loop.phase_margin)
         out.append(
             Check(
                 _name(config),
                 "min_phase_margin_deg",
-                v >= min_phase_margin_deg,
+                v >= pm,
                 v,
-                min_phase_margin_deg,
-                f"phase margin {v:.3g} deg {'>=' if v >= min_phase_margin_deg else '<'} "
-                f"{min_phase_margin_deg:g} deg",
+                pm,
+                f"phase margin {v:.3g} deg {'>=' if v >= pm else '<'} {pm:g} deg",
             )
         )
     return out
 
 
+def _not_analysed(config: StageConfig, gm: float | None, pm: float | None, why: str) -> list:
+    limits = (("min_gain_margin_db", gm), ("min_phase_margin_deg", pm))
+    return [_failed(config, k, v, f"not analysed: {why}") for k, v in limits if v is not None]
+
+
+def check_margins(
+    config: StageConfig,
+    *,
+    min_gain_margin_db: float | None = None,
+    min_phase_margin_deg: float | None = None,
+) -> list[Check]:
+    """Gain and phase margins of the sampled loop (observer + eq. 12 at dt)."""
+    _need_margins(config)
+    gm, pm = min_gain_margin_db, min_phase_margin_deg
+    why = _not_hurwitz(config, config.gains)
+    if why is not None:
+        return _not_analysed(config, gm, pm, why)
+    return _margins(config, study(config, parts={"loop"}), gm, pm)
+
+
+def _min_decay(c: Check, limit: float) -> Check:
+    v = float(c.details["decay_rate"])
+    text = f"certified decay {v:.4g} 1/s {'>=' if v >= limit else '<'} {limit:g}"
+    if c.details["report"] is None:  # nothing was certified: say why
+        text = c.text
+    return Check(c.stage, "min_decay", v >= limit, v, limit, text)
+
+
 def check_requirements(stage: Any) -> list[Check]:
-    """Every requirement of the stage's ``[requirements]`` section, in the schema's order."""
+    """Every requirement of the stage's ``[requirements]`` section, in the schema's order.
+
+    One study of the stage, with the parts the requirements read, behind every check.
+    """
     config = as_stage(stage)
     req = config.requirements
     if not req:
         raise ConfigError(f"{_name(config)}: no [requirements] section to check")
+    certified = bool(req.get("certified")) or "min_decay" in req
+    tracking = {k: req[k] for k, _, _ in _TRACKING if k in req}
+    gm, pm = req.get("min_gain_margin_db"), req.get("min_phase_margin_deg")
+    parts = set()
+    if certified:
+        _need_certificate(config, config.gains, _stage_envelope(config))
+        parts.add("configured")
+    if tracking:
+        _need_tracking(config)
+        parts.add("corner_tracking")
+    if gm is not None or pm is not None:
+        _need_margins(config)
+        parts.add("loop")
+    why = _not_hurwitz(config, config.gains) if parts else None
+    s = None if why is not None or not parts else study(config, parts=parts)
     out: list[Check] = []
-    if req.get("certified") or "min_decay" in req:
-        c = check_certified(config)
-        if req.get("certified"):
-            out.append(c)
-        if "min_decay" in req:
-            v = float(c.details["decay_rate"])
-            lim = req["min_decay"]
-            text = f"certified decay {v:.4g} 1/s {'>=' if v >= lim else '<'} {lim:g}"
-            if c.details["report"] is None:  # nothing was certified: say why
-                text = c.text
-            out.append(Check(c.stage, "min_decay", v >= lim, v, lim, text))
-    if "max_me_um" in req or "max_maxe_um" in req:
-        out += check_tracking(
-            config,
-            max_me=req.get("max_me_um"),
-            max_maxe=req.get("max_maxe_um"),
-            noise_std=req.get("noise_std_um", 0.0),
-            observer=req.get("observer", "phso"),
-            duration=req.get("duration_s"),
-            start=req.get("start", "reference"),
+    if certified:
+        c = _not_certified(config, None, why) if s is None else _certified(config, s, None, 0.0)
+        out += [c] if req.get("certified") else []
+        out += [_min_decay(c, req["min_decay"])] if "min_decay" in req else []
+    if tracking:
+        out += (
+            _not_simulated(config, tracking, why) if s is None else _tracking(config, s, tracking)
         )
-    if "min_gain_margin_db" in req or "min_phase_margin_deg" in req:
-        out += check_margins(
-            config,
-            min_gain_margin_db=req.get("min_gain_margin_db"),
-            min_phase_margin_deg=req.get("min_phase_margin_deg"),
-        )
+    if gm is not None or pm is not None:
+        out += _not_analysed(config, gm, pm, why) if s is None else _margins(config, s, gm, pm)
     order = list(REQUIREMENT_KEYS)
     return sorted(out, key=lambda c: order.index(c.name))
 

@@ -1,0 +1,105 @@
+"""``bwdesign report --config FILE.toml --out DIR`` (registered in :mod:`bwdesign.cli.main`).
+
+The command line becomes one frozen :class:`ReportRequest` (validated once); the
+argparse namespace is read, never changed. Exit codes: 0 the report says
+CERTIFIED; 1 it says no (not certified, synthesis infeasible, the reference needs
+more input than the limits allow), the report is written; 2 bad input, one
+``error:`` line and nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+
+from .args import EXIT_NO, EXIT_OK, UsageError
+
+__all__ = ["ReportRequest", "report_args", "run_report"]
+
+
+def report_args(p: argparse.ArgumentParser) -> None:
+    """Arguments of ``bwdesign report``."""
+    p.add_argument(
+        "--config",
+        required=True,
+        metavar="FILE.toml",
+        help="stage configuration file, or a bundled preset's name (see bwdesign presets)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="report directory: new, empty, or a report bwdesign wrote (its files are "
+        "replaced); never the current directory",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="write into a directory holding other files (they are kept, never overwritten)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument(
+        "--allow-unbounded",
+        action="store_true",
+        help="accept parameters outside the bounded Bouc-Wen class",
+    )
+
+
+@dataclass(frozen=True)
+class ReportRequest:
+    """What ``bwdesign report`` was asked: the stage, the directory and the switches.
+
+    Parameters
+    ----------
+    config : str
+        A stage file or a bundled preset's name (resolved by
+        :func:`bwdesign.model.config.load_config`).
+    out : str
+        The report directory, as given (checked by the output layer before any work).
+    force, quiet, allow_unbounded : bool
+    """
+
+    config: str
+    out: str
+    force: bool = False
+    quiet: bool = False
+    allow_unbounded: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("config", "out"):
+            if not isinstance(getattr(self, name), str):
+                raise UsageError(f"--{name} must be a path, got {getattr(self, name)!r}")
+        for name in ("force", "quiet", "allow_unbounded"):
+            if not isinstance(getattr(self, name), bool):
+                raise UsageError(f"{name} must be true or false, got {getattr(self, name)!r}")
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> ReportRequest:
+        """The request of parsed arguments (read only)."""
+        return cls(
+            config=args.config,
+            out=args.out,
+            force=args.force,
+            quiet=args.quiet,
+            allow_unbounded=args.allow_unbounded,
+        )
+
+
+def run_report(args: argparse.Namespace) -> int:
+    """Write the report :class:`ReportRequest` ``args`` asks for; print where and the verdict."""
+    from ..model.config import load_config
+    from ..output.files import prepare_directory
+    from ..report.certified import write_report
+
+    req = ReportRequest.from_args(args)
+    # --out is checked before the stage file is read: a bad directory is said first
+    prepare_directory(req.out, command="report", force=req.force, what="--out")
+    outcome = write_report(
+        load_config(req.config),
+        req.out,
+        quiet=req.quiet,
+        allow_unbounded=req.allow_unbounded,
+        force=req.force,
+    )
+    print(f"{outcome.out_dir}/report.md: {outcome.verdict}")
+    return EXIT_OK if outcome.certified else EXIT_NO

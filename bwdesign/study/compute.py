@@ -1,0 +1,456 @@
+"""Computing a study: :func:`study` runs each asked part once, its dependencies first.
+
+Every part is computed by one function here (or in its module: tiers, tracking,
+sweep, robust, verdict), the same way whoever asks: the report asks for
+:data:`~bwdesign.study.result.REPORT_PARTS`, ``bwdesign check`` and
+:mod:`bwdesign.testing` for the parts their requirements read.
+"""
+
+from __future__ import annotations
+
+import platform
+from collections.abc import Callable, Iterable
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+from ..certify.linear import error_dynamics, hysteresis_bode
+from ..certify.synthesis import synthesize
+from ..certify.tiers import certify
+from ..control.analysis import analyze_loop
+from ..control.tuning import digital_tuning
+from ..errors import ConfigError, InputError
+from ..model.config import StageConfig
+from ..model.params import require_bounded
+from ..model.summary import plant_summary
+from ..observers.gains import check_gains, discrete_gains
+from .result import (
+    DEFAULT_DECAY,
+    PARTS,
+    REPORT_PARTS,
+    CornerTracking,
+    Firmware,
+    GainSetDynamics,
+    InputRange,
+    LoopStudy,
+    PlantSummary,
+    Study,
+    StudySettings,
+    Synthesis,
+    TierSynthesisStudy,
+)
+from .robust import robust_study
+from .sweep import check_stage_sweep, stage_sweep
+from .tiers import SEARCH_RTOL, synthesize_per_tier
+from .tracking import corner_tracking, input_limits, required_input, tracking_runs
+from .verdict import recommend, verdict
+
+__all__ = ["study", "versions", "synthesis_request"]
+
+#: The libraries whose versions a study records (beside Python's).
+LIBRARIES = (
+    "bwdesign",
+    "numpy",
+    "scipy",
+    "cvxpy",
+    "clarabel",
+    "scs",
+    "control",
+    "filterpy",
+    "matplotlib",
+)
+
+#: Stage sections a part needs (besides [plant]), with what each section is for.
+SECTIONS = {
+    "dt": "[sampling] (dt)",
+    "envelope": "[envelope] (udot_max or from_reference)",
+    "reference": "[reference] (the trajectory simulated at the envelope)",
+    "controller": "[controller] (lambda1, lambda2)",
+}
+_LOOP = ("dt", "envelope", "reference", "controller")
+NEEDS: dict[str, tuple[str, ...]] = {
+    "plant": (),
+    "envelope": ("envelope",),
+    "input": ("envelope", "reference"),
+    "configured": ("envelope",),
+    "synthesis": ("envelope",),
+    "tuning": ("dt",),
+    "tracking": _LOOP,
+    "verdict": _LOOP,
+    "tier_synthesis": ("envelope",),
+    "error_dynamics": ("envelope",),
+    "loop": ("dt", "controller"),
+    "sweep": (),
+    "robust": ("dt", "envelope", "reference"),
+    "firmware": ("dt", "envelope"),
+    "recommendation": _LOOP,
+    "versions": (),
+    "corner_tracking": ("dt", "reference", "controller"),
+}
+#: Parts computed from the ``[observer]`` gains (checked to be Hurwitz before any work).
+USES_GAINS = frozenset(
+    ("configured", "tracking", "verdict", "error_dynamics", "loop", "firmware")
+    + ("recommendation", "corner_tracking")
+)
+
+#: Parts computed for any plant (the linear analyses); the others need the bounded class.
+ANY_PLANT = frozenset(("plant", "tuning", "loop", "versions"))
+
+_CERTIFYING = "certifying the configured gains and synthesising a certified set"
+
+
+class _Run:
+    """One study being computed: the parts done so far, each computed on first use."""
+
+    def __init__(
+        self,
+        config: StageConfig,
+        allow_unbounded: bool,
+        settings: StudySettings,
+        progress: Callable[[str], None] | None,
+    ) -> None:
+        self.config = config
+        self.params = config.plant
+        self.allow_unbounded = allow_unbounded
+        self.settings = settings
+        self.progress = progress
+        self.done: dict[str, Any] = {}
+        self._said: set[str] = set()
+
+    def compute(self, part: str) -> Any:
+        """The part ``part``, computed now unless it was before."""
+        if part not in self.done:
+            self.done[part] = _COMPUTE[part](self)
+        return self.done[part]
+
+    __getitem__ = compute
+
+    def say(self, message: str) -> None:
+        """A progress line (once per message)."""
+        if self.progress is not None and message not in self._said:
+            self._said.add(message)
+            self.progress(message)
+
+    @property
+    def dt(self) -> float | None:
+        return self.config.dt
+
+    @property
+    def udot_max(self) -> float:
+        return self["envelope"].udot_max
+
+    def loop_gains(self) -> Any:
+        """The gains of the loop: the ``[observer]`` gains, else the synthesised ones."""
+        if self.config.gains is not None:
+            return self.config.gains
+        return self["synthesis"].result.gains
+
+
+def synthesis_request(config: StageConfig) -> tuple[float, float | None]:
+    """The decay (1/s) and pole radius (rad/s) ``[synthesis]`` asks (decay default 100 1/s)."""
+    spec = config.synthesis or {}
+    return spec.get("decay", DEFAULT_DECAY), spec.get("pole_radius")
+
+
+def versions() -> dict[str, str]:
+    """Python's version and each of :data:`LIBRARIES`' ("not installed" when absent)."""
+    out = {"python": platform.python_version()}
+    for pkg in LIBRARIES:
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+# -- the parts ---------------------------------------------------------------------
+
+
+def _plant(r: _Run) -> PlantSummary:
+    summ = plant_summary(r.params)
+    d, bc = summ["derived"], summ["bounded_class"]
+    return PlantSummary(
+        params=r.params,
+        natural_frequency_hz=d["natural_frequency_hz"],
+        damping_ratio=d["damping_ratio"],
+        static_gain=d["static_gain"],
+        static_gain_unit=d["static_gain_unit"],
+        bounded=bc["bounded"],
+        bounded_reason=bc["reason"],
+        note=summ.get("note"),
+    )
+
+
+def _envelope(r: _Run) -> Any:
+    return r.config.envelope(allow_unbounded=r.allow_unbounded)
+
+
+def _input(r: _Run) -> InputRange:
+    limits = input_limits(r.config)
+    need = required_input(r.config, r["envelope"], allow_unbounded=r.allow_unbounded)
+    within = None
+    if limits is not None and need is not None:
+        within = bool(limits[0] <= need[0] and need[1] <= limits[1])
+    return InputRange(limits=limits, feedforward=need, within_limits=within)
+
+
+def _configured(r: _Run) -> Any:
+    r.say(_CERTIFYING)
+    if r.config.gains is None:
+        return None
+    return certify(
+        r.params,
+        r.config.gains,
+        udot_max=r.udot_max,
+        decay=r.settings.decay,
+        dt=r.dt,
+        allow_unbounded=r.allow_unbounded,
+    )
+
+
+def _synthesis(r: _Run) -> Synthesis:
+    r.say(_CERTIFYING)
+    decay, pole_radius = synthesis_request(r.config)
+    res = synthesize(
+        r.params,
+        udot_max=r.udot_max,
+        decay=decay,
+        pole_radius=pole_radius,
+        dt=r.dt,
+        allow_unbounded=r.allow_unbounded,
+    )
+    return Synthesis(decay=decay, pole_radius=pole_radius, result=res)
+
+
+def _tuning(r: _Run) -> Any:
+    return digital_tuning(r.params, r.dt)
+
+
+def _tracking(r: _Run) -> Any:
+    gains, tuning = r.loop_gains(), r["tuning"]
+    r.say("simulating the tracking loop at the envelope (PHSO, ESO and PHDO)")
+    return tracking_runs(r.config, gains=gains, tuning=tuning, allow_unbounded=r.allow_unbounded)
+
+
+def _verdict(r: _Run) -> Any:
+    synth = r["synthesis"].result
+    return verdict(r.config, r["configured"], synth, r.udot_max, r["input"], r["tracking"])
+
+
+def _tier_synthesis(r: _Run) -> TierSynthesisStudy:
+    r.say("synthesis per tier (the largest envelope synthesised gains reach)")
+    decay, pole_radius = synthesis_request(r.config)
+    rows = synthesize_per_tier(
+        r.params,
+        udot_max=r.udot_max,
+        decay=decay,
+        dt=r.dt,
+        pole_radius=pole_radius,
+        allow_unbounded=r.allow_unbounded,
+    )
+    return TierSynthesisStudy(
+        udot_max=r.udot_max, decay=rows[0].decay, search_rtol=SEARCH_RTOL, rows=tuple(rows)
+    )
+
+
+def _error_dynamics(r: _Run) -> tuple[GainSetDynamics, ...]:
+    synth = r["synthesis"].result
+    r.say("linear analysis of the observer error dynamics")
+    sets = {}
+    if r.config.gains is not None:
+        sets["configured"] = r.config.gains
+    if synth.gains is not None:
+        sets["synthesised"] = synth.gains
+    out = []
+    for label, g in sets.items():
+        ed = error_dynamics(r.params, g, udot_max=r.udot_max)
+        out.append(GainSetDynamics(label, tuple(g), ed, hysteresis_bode(r.params, g)))
+    return tuple(out)
+
+
+def _loop(r: _Run) -> LoopStudy:
+    gains = r.loop_gains()
+    r.say("tracking-loop analysis (continuous, sampled, digital tuning)")
+    ctl = r.config.controller
+    return LoopStudy(
+        lambda1=ctl.lambda1,
+        lambda2=ctl.lambda2,
+        gains=tuple(gains),
+        continuous=analyze_loop(r.params, ctl.lambda1, ctl.lambda2, gains),
+        sampled=analyze_loop(r.params, ctl.lambda1, ctl.lambda2, gains, dt=r.dt),
+    )
+
+
+def _sweep(r: _Run) -> Any:
+    if r.config.sweep is None:
+        return None
+    r.say(f"Monte Carlo sweep over [uncertainty]: {r.config.sweep['samples']} scenarios")
+    return stage_sweep(r.config)
+
+
+def _robust(r: _Run) -> Any:
+    box = r.config.uncertainty
+    if box is None or box.undetermined():
+        return None
+    tuning = r["tuning"]
+    r.say("robust certificate over [uncertainty] (every corner)")
+    return robust_study(r.config, tuning, r.udot_max)
+
+
+def _firmware(r: _Run) -> Firmware:
+    configured, synth = r["configured"], r["synthesis"].result
+    gains = r.config.gains
+
+    def floats(k: Any) -> tuple[float, ...] | None:
+        return None if k is None else tuple(float(v) for v in k)
+
+    return Firmware(
+        dt=r.dt,
+        configured_K=None if configured is None else floats(configured.discrete_gains),
+        synthesized_K=floats(synth.discrete_gains),
+        pole_matched=None if gains is None else floats(discrete_gains(r.params, gains, r.dt)),
+    )
+
+
+def _recommendation(r: _Run) -> Any:
+    return recommend(r["tuning"], r["tracking"])
+
+
+def _corner_tracking(r: _Run) -> CornerTracking:
+    s = r.settings
+    duration, plants, res = corner_tracking(
+        r.config,
+        observer=s.observer,
+        noise_std=s.noise_std,
+        duration=s.duration,
+        start=s.start,
+        mismatch=s.mismatch,
+        allow_unbounded=r.allow_unbounded,
+    )
+    return CornerTracking(settings=s, duration=duration, plants=plants, result=res)
+
+
+_COMPUTE: dict[str, Callable[[_Run], Any]] = {
+    "plant": _plant,
+    "envelope": _envelope,
+    "input": _input,
+    "configured": _configured,
+    "synthesis": _synthesis,
+    "tuning": _tuning,
+    "tracking": _tracking,
+    "verdict": _verdict,
+    "tier_synthesis": _tier_synthesis,
+    "error_dynamics": _error_dynamics,
+    "loop": _loop,
+    "sweep": _sweep,
+    "robust": _robust,
+    "firmware": _firmware,
+    "recommendation": _recommendation,
+    "versions": lambda r: versions(),
+    "corner_tracking": _corner_tracking,
+}
+
+
+# -- asking --------------------------------------------------------------------------
+
+
+def _asked(parts: Iterable[str] | None) -> frozenset[str]:
+    if parts is None:
+        return REPORT_PARTS
+    if isinstance(parts, str):
+        parts = (parts,)
+    try:
+        asked = frozenset(parts)
+    except TypeError:
+        raise InputError(f"parts must be a collection of part names, got {parts!r}") from None
+    unknown = sorted(asked - set(PARTS))
+    if unknown:
+        raise InputError(f"unknown study part(s) {unknown}; parts: {', '.join(PARTS)}")
+    return asked
+
+
+def _preflight(r: _Run, asked: frozenset[str]) -> None:
+    """Every check that can end in an ``error:`` line, before any work (and progress line)."""
+    config = r.config
+    if asked - ANY_PLANT:
+        require_bounded(r.params, r.allow_unbounded)
+    needs = {s for p in asked for s in NEEDS[p]}
+    if config.gains is None and asked & {"loop"}:
+        needs.add("envelope")  # the loop runs the synthesised gains
+    values = {
+        "dt": config.dt,
+        "envelope": config.envelope_spec,
+        "reference": config.reference,
+        "controller": config.controller,
+    }
+    missing = [text for key, text in SECTIONS.items() if key in needs and values[key] is None]
+    if missing:
+        who = (
+            "the report"
+            if asked >= REPORT_PARTS
+            else f"the study ({', '.join(p for p in PARTS if p in asked)})"
+        )
+        raise ConfigError(
+            f"{config.source or 'config'}: {who} needs section(s) {', '.join(missing)}"
+        )
+    if "envelope" in needs:
+        r.compute("envelope")
+    if config.gains is not None and asked & USES_GAINS:
+        check_gains(r.params, config.gains)
+    if "sweep" in asked and config.sweep is not None:
+        check_stage_sweep(config)
+
+
+def study(
+    config: StageConfig,
+    *,
+    allow_unbounded: bool = False,
+    parts: Iterable[str] | None = None,
+    progress: Callable[[str], None] | None = None,
+    settings: StudySettings | None = None,
+) -> Study:
+    """Compute the study of a stage: everything the certified-gains report shows.
+
+    Parameters
+    ----------
+    config : StageConfig
+    allow_unbounded : bool
+        Accept a plant outside the bounded Bouc-Wen class.
+    parts : collection of str, optional
+        The parts to compute (names from :data:`~bwdesign.study.result.PARTS`; the parts
+        they depend on are computed too). Default: every part the report shows.
+    progress : callable, optional
+        Called with a line of text as each long part starts.
+    settings : StudySettings, optional
+        What the checks ask beyond the file; default the stage's ``[requirements]``
+        tracking settings, certificates at decay 0.
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    ConfigError
+        A section a part needs is missing, or ``[sweep]`` cannot run.
+    GainError, UnboundedModelError, InputError
+        Gains that are not Hurwitz, a plant outside the bounded class, bad parts.
+    """
+    if not isinstance(config, StageConfig):
+        raise InputError(f"config must be a StageConfig, got {type(config).__name__}")
+    if settings is None:
+        settings = StudySettings.from_requirements(config.requirements)
+    elif not isinstance(settings, StudySettings):
+        raise InputError(f"settings must be a StudySettings, got {type(settings).__name__}")
+    asked = _asked(parts)
+    r = _Run(config, bool(allow_unbounded), settings, progress)
+    _preflight(r, asked)
+    for part in PARTS:
+        if part in asked:
+            r.compute(part)
+    return Study(
+        config=config,
+        allow_unbounded=r.allow_unbounded,
+        settings=settings,
+        parts=frozenset(r.done),
+        **r.done,
+    )

@@ -1,0 +1,88 @@
+"""The study's robust section: certificates over ``[uncertainty]`` beside the simulated corners.
+
+For the digital tuning's loop (its eq. (12) constants, integral rate and
+compensated delay) with the PHSO and with the disturbance observer (PHDO, the
+tuning's ``(l1, l2, 0, l3)``): :func:`bwdesign.certify_robust` over every corner
+of the box, beside the worst error :func:`bwdesign.sim.simulate_batch` finds at
+those corners. Like for like, the simulated columns are steady-state max
+``|error|`` (tracking, ``x1`` and ``x3`` estimates; the PHDO's ``x3`` is the
+lumped ``x3hat + dhat``) over the batch's metrics window (the last two reference
+periods), as the certified bounds are peak bounds after the transient.
+
+A robust certificate assumes the loop keeps ``|u'| <= udot_max`` and does not
+prove it: the corners are simulated first, and when their input moves faster than
+the stage's envelope the certificate is asked for
+:func:`bwdesign.sim.robust_design.certified_envelope` of their fastest rate.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..certify.robust import certify_robust
+from ..control.loop import ClosedLoop
+from ..control.tuning import DigitalTuning
+from ..model.config import StageConfig
+from ..sim.robust_design import certified_envelope, simulate_corners
+from .result import RobustLoop, RobustStudy
+
+__all__ = ["robust_study", "robust_loop", "ROBUST_OBSERVERS"]
+
+#: The observers of the robust section, in table order.
+ROBUST_OBSERVERS = ("phso", "phdo")
+
+
+def robust_loop(
+    config: StageConfig, tuning: DigitalTuning, udot_max: float, observer: str
+) -> RobustLoop:
+    """One observer's robust certificate and its corners simulated (noise free)."""
+    params, box, ref, dt = config.plant, config.uncertainty, config.reference, float(config.dt)
+    gains = tuning.observer_gains_for(observer)
+    loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
+    sim = simulate_corners(loop, box, ref)
+    stable = bool(sim.stable.all())
+    rate = float(np.nanmax(sim.input_rate_max)) if stable else math.nan
+    env = certified_envelope(udot_max, rate) if stable else udot_max
+    rc = certify_robust(
+        params,
+        gains,
+        dt=dt,
+        uncertainty=box,
+        udot_max=env,
+        reference=ref,
+        lambda1=tuning.lambda1,
+        lambda2=tuning.lambda2,
+        integral_rate=tuning.integral_rate,
+        delay=tuning.delay,
+        observer=observer,
+    )
+    worst = float(np.nanmax(sim.maxe)) if stable else math.nan
+    worst_est = np.nanmax(sim.estimation_maxe, axis=0) if stable else np.full(3, math.nan)
+    ratio = rc.tracking_bound / worst if rc.holds and worst > 0 else None
+    return RobustLoop(
+        observer=observer,
+        gains=tuple(gains),
+        certificate=rc,
+        envelope=env,
+        simulated_input_rate_max=rate,
+        simulated_worst_maxe=worst,
+        simulated_worst_estimation_maxe=tuple(worst_est.tolist()),
+        simulated_window=tuple(sim.window),
+        samples=sim.samples,
+        all_corners_stable=stable,
+        conservatism=ratio,
+    )
+
+
+def robust_study(config: StageConfig, tuning: DigitalTuning, udot_max: float) -> RobustStudy:
+    """The robust section of ``config`` (needs a determined ``[uncertainty]`` box).
+
+    The certified bounds are noise free (``noise_max = 0``) and so is the vertex
+    simulation, so the two compare the same loops.
+    """
+    loops = tuple(robust_loop(config, tuning, udot_max, obs) for obs in ROBUST_OBSERVERS)
+    return RobustStudy(
+        udot_max=udot_max, bounds=config.uncertainty.bounds(config.plant), loops=loops
+    )
