@@ -289,8 +289,8 @@ def test_solver_failure_is_reported(experiment, monkeypatch):
         assert rep.tier(name).holds and "KYP" in rep.tier(name).status
     assert_certificate_valid(rep)
     # and with those off too, a solver failure is a status, never a "holds"
-    monkeypatch.setattr(verified_mod, "_kyp_candidates", lambda *a: [])
-    monkeypatch.setattr(verified_mod, "_dare_candidates", lambda *a: [])
+    monkeypatch.setattr(verified_mod, "kyp_candidates", lambda *a: [])
+    monkeypatch.setattr(verified_mod, "dare_candidates", lambda *a: [])
     rep = certify(experiment, PAPER_GAINS, udot_max=EXPERIMENT_ENVELOPE, dt=DT)
     for name in ("lipschitz", "sector", "sampled"):
         cert = rep.tier(name)
@@ -586,7 +586,7 @@ def test_cli_json_stays_clean_when_a_solver_fails(capfd):
     mp.setattr(lmi_core, "SOLVERS", ("SCS",))
     mp.setattr(lmi_core, "_OPTIONS", {"SCS": {"max_iters": 1}})
     mp.setattr(lmi_core, "_LOCAL", threading.local())
-    mp.setattr(verified_mod, "_kyp_candidates", lambda *a: [])  # no Riccati P: the LMI must run
+    mp.setattr(verified_mod, "kyp_candidates", lambda *a: [])  # no Riccati P: the LMI must run
     argv = ["certify", "--plant", "paper_experiment"]
     argv += ["--gains", "8,64,-512", "--udot-max", "361", "--json"]
     try:

@@ -45,8 +45,8 @@ TEMPLATES_HOME = "bwdesign.codegen"
 FACADES = {"bwdesign", "bwdesign.__main__"}
 
 
-def _module_name(path: Path) -> str:
-    rel = path.relative_to(PKG.parent).with_suffix("")
+def _module_name(path: Path, root: Path = PKG) -> str:
+    rel = path.relative_to(root.parent).with_suffix("")
     parts = list(rel.parts)
     if parts[-1] == "__init__":
         parts.pop()
@@ -183,6 +183,88 @@ def test_modules_stay_small():
     assert not big, f"split along their concerns: {big}"
 
 
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _private_imports(path: Path, modules: set[str], root: Path = PKG) -> list[str]:
+    """``target.name`` for every underscore name ``path`` takes from another bwdesign module.
+
+    Counted: ``from X import _name`` and ``X._name`` where ``X`` is a name bound to
+    an imported bwdesign module (function bodies included); dunder names are public.
+    """
+    mod = _module_name(path, root)
+    package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
+    tree = ast.parse(path.read_text(), str(path))
+    bound: dict[str, str] = {}  # local name -> bwdesign module it is bound to
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[: len(base) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "bwdesign":
+                continue
+            for a in node.names:
+                full = f"{target}.{a.name}"
+                if full in modules:
+                    bound[a.asname or a.name] = full
+                if _private(a.name) and target != mod:
+                    out.append(full)
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.asname and a.name.split(".")[0] == "bwdesign":
+                    bound[a.asname] = a.name
+                elif a.name.split(".")[0] == "bwdesign":
+                    bound["bwdesign"] = "bwdesign"
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and _private(node.attr):
+            chain, value = [], node.value
+            while isinstance(value, ast.Attribute):
+                chain.append(value.attr)
+                value = value.value
+            if isinstance(value, ast.Name) and value.id in bound:
+                target = ".".join([bound[value.id], *reversed(chain)])
+                if target in modules and target != mod:
+                    out.append(f"{target}.{node.attr}")
+    return sorted(set(out))
+
+
+#: Underscore names still taken across modules in the layers being rewritten (sim/, cli/):
+#: to be removed by the ClosedLoop/study change (issue 25), which replaces these modules.
+#: An entry that no longer occurs fails the test, so the list only shrinks.
+PRIVATE_IMPORTS_ALLOWED = {
+    "bwdesign.cli.main": {"bwdesign.cli.args._Parser"},
+    "bwdesign.sim.batch": {
+        "bwdesign.sim.closed_loop._diverged",
+        "bwdesign.sim.closed_loop._finite_nonneg",
+        "bwdesign.sim.closed_loop._state",
+    },
+    "bwdesign.sim.continuous": {
+        "bwdesign.sim.closed_loop._controller",
+        "bwdesign.sim.closed_loop._finish",
+        "bwdesign.sim.closed_loop._finite_nonneg",
+        "bwdesign.sim.closed_loop._state",
+    },
+}
+
+FILES = {_module_name(p): p for p in PKG.rglob("*.py")}
+
+
+@pytest.mark.parametrize("mod", sorted(FILES))
+def test_no_underscore_name_is_imported_across_modules(mod):
+    """A name another module needs is public at home (no leading underscore)."""
+    found = set(_private_imports(FILES[mod], set(FILES)))
+    allowed = PRIVATE_IMPORTS_ALLOWED.get(mod, set())
+    bad = sorted(found - allowed)
+    assert not bad, f"{mod} takes underscore names from other modules: {bad}; make them public"
+    stale = sorted(allowed - found)
+    assert not stale, f"{mod} no longer imports {stale}: remove them from the allow-list"
+
+
 def test_the_checks_can_fail():
     """The rules catch what they are for: an upward import, a cycle, a function-level import."""
     assert _upward("bwdesign.model.params", {"bwdesign.cli.main"}) == ["bwdesign.cli.main"]
@@ -193,3 +275,24 @@ def test_the_checks_can_fail():
     assert _find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
     # write_report imports the figures inside a function: the graph sees it
     assert "bwdesign.plotting.figures" in GRAPH["bwdesign.report.certified"]
+
+
+def test_the_underscore_rule_can_fail(tmp_path):
+    """Both spellings are caught, in function bodies too; dunders and own names are not."""
+    pkg = tmp_path / "bwdesign"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "home.py").write_text("_x = 1\n__version__ = '1'\n")
+    (pkg / "sub" / "user.py").write_text(
+        "from . import home\n"
+        "from .home import __version__\n"
+        "from bwdesign.sub.home import _x as y\n"
+        "_own = 2\n"
+        "def f():\n"
+        "    import bwdesign.sub.home as h\n"
+        "    import bwdesign.sub.home\n"
+        "    return home._x + h._y + bwdesign.sub.home._z + _own\n"
+    )
+    modules = {"bwdesign.sub", "bwdesign.sub.home", "bwdesign.sub.user"}
+    found = _private_imports(pkg / "sub" / "user.py", modules, root=pkg)
+    assert found == ["bwdesign.sub.home._x", "bwdesign.sub.home._y", "bwdesign.sub.home._z"]

@@ -55,14 +55,14 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize
+from ..model.plant import check_dt, discretize
 from ..observers.gains import (
     check_disturbance_discrete,
     check_disturbance_gains,
     disturbance_discrete_gains,
     error_matrix,
 )
-from .checks import _negdef, _posdef, rho_interval, sector_interval
+from .checks import negdef, posdef, rho_interval, sector_interval
 from .results import Margin
 
 __all__ = [
@@ -181,7 +181,7 @@ def _problem(
         lw = l3 + l4
         A_o = error_matrix(params, (l1, l2, lw))
         return _Problem("sector", A_o, l3 / lw, sector_interval(params, udot_max), False)
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     if (gains is None) == (discrete_K is None):
         raise InputError("give either continuous gains (l1, l2, l3, l4) or discrete=K")
     if discrete_K is None:
@@ -203,7 +203,7 @@ def _scale(params: BoucWenParams) -> np.ndarray:
 def _check(pr: _Problem, P: np.ndarray) -> tuple[Margin, ...]:
     """The outside check of ``P`` (original coordinates) at every end of the interval."""
     P = (P + P.T) / 2
-    margins = [_posdef("P > 0", P)]
+    margins = [posdef("P > 0", P)]
     off = float(np.max(np.abs(P[:3, 3]))) if P.shape == (4, 4) else math.inf
     scale = float(np.max(np.abs(np.diag(P))))
     margins.append(Margin("P block diagonal (|P[:3, 3]| / max |P_ii|)", off / scale, 1e-12))
@@ -215,12 +215,12 @@ def _check(pr: _Problem, P: np.ndarray) -> tuple[Margin, ...]:
         A = pr.A_o
         M = A.T @ Po @ A - Po if pr.discrete else A.T @ Po + Po @ A
         what = "Phi_o' P_o Phi_o - P_o" if pr.discrete else "He(P_o A_o)"
-        margins.append(_negdef(f"{what} < 0 at {name} = {pr.degenerate:g}", M))
+        margins.append(negdef(f"{what} < 0 at {name} = {pr.degenerate:g}", M))
     for v in others:
         A = pr.vertex(v)
         M = A.T @ P @ A - P if pr.discrete else A.T @ P + P @ A
         what = "A_d' P A_d - P" if pr.discrete else "He(P A)"
-        margins.append(_negdef(f"{what} < 0 at {name} = {v:.6g}{unit}", M))
+        margins.append(negdef(f"{what} < 0 at {name} = {v:.6g}{unit}", M))
     return tuple(margins)
 
 
@@ -367,7 +367,7 @@ def synthesize_disturbance(
     """
     from . import lmi
 
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     decay = float(decay)
     if not (math.isfinite(decay) and decay > 0):
         raise InputError(f"decay must be a finite rate > 0 (1/s), got {decay}")

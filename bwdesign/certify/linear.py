@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..observers.gains import check_gains, error_matrix
-from .checks import _scale_continuous, sector_interval
+from .checks import scale_continuous, sector_interval
 
 __all__ = [
     "ErrorDynamics",
@@ -96,7 +96,7 @@ def error_system(
 def _scaled_system(params: BoucWenParams, gains: Sequence[float], *, k: float, decay: float):
     import control
 
-    sc = _scale_continuous(params, error_matrix(params, gains))
+    sc = scale_continuous(params, error_matrix(params, gains))
     Ah = sc.Ahat.copy()
     Ah[2, 2] -= k / sc.w
     Ah += (decay / sc.w) * np.eye(3)
@@ -174,7 +174,7 @@ def error_dynamics(
     udot_max = _nonneg(udot_max, "udot_max (V/s)")
     gains = tuple(check_gains(params, gains).tolist())
     k_int = sector_interval(params, udot_max)
-    sc = _scale_continuous(params, error_matrix(params, gains))
+    sc = scale_continuous(params, error_matrix(params, gains))
     systems, poles, wns, zetas = [], [], [], []
     for k in k_int:
         systems.append(error_system(params, gains, k=k))

@@ -66,7 +66,7 @@ from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import _as_gains, check_gains, discrete_gains
+from ..observers.gains import as_gains, check_gains, discrete_gains
 from ..validate import POLE_RADIUS, UDOT_MAX, real
 from .checks import continuous_equivalent, rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction
@@ -529,7 +529,7 @@ def certify_robust_observer(
     if discrete is None:
         K = discrete_gains(params, check_gains(params, gains), dt)
     else:
-        K = np.asarray(_as_gains(discrete, "discrete gains K"), float)
+        K = np.asarray(as_gains(discrete, "discrete gains K"), float)
     pb = _problem(
         params,
         dt=dt,

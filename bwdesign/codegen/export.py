@@ -56,7 +56,7 @@ from ..errors import ConfigError, InputError, NotCertifiedError
 from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.plant import discretize
-from ..observers.base import _SampledObserver
+from ..observers.base import SampledObserver
 from ..observers.gains import gains_for_observer
 from ..observers.sampled import (
     DisturbanceHysteresisObserver,
@@ -70,7 +70,7 @@ from .literals import CTypes
 __all__ = ["OBSERVERS", "CExport", "export_c", "c_sources"]
 
 #: The sampled observers the C library carries, by the name ``--observer`` takes.
-OBSERVERS: dict[str, tuple[type[_SampledObserver], str]] = {
+OBSERVERS: dict[str, tuple[type[SampledObserver], str]] = {
     "phso": (HysteresisObserver, "hysteresis observer (PHSO, paper eq. 3)"),
     "eso": (ExtendedStateObserver, "extended state observer (ESO, paper eq. 21)"),
     "phdo": (

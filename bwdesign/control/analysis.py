@@ -11,8 +11,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..observers.gains import _as_gains
-from .systems import LoopSystems, _gain_interval, _stable, loop_systems
+from ..observers.gains import as_gains
+from .systems import LoopSystems, gain_interval, loop_systems, stability
 
 __all__ = ["LoopAnalysis", "MismatchSweep", "analyze_loop", "mismatch_sweep", "stability_interval"]
 
@@ -207,10 +207,10 @@ def analyze_loop(
         with np.errstate(divide="ignore"):
             poles_s = np.log(poles.astype(complex)) / dt
         rho = float(np.max(np.abs(poles)))
-    stable, _ = _stable(sy.A_cl, dt)
+    stable, _ = stability(sy.A_cl, dt)
     maxre = float(np.max(poles_s.real))
 
-    gm = _gain_interval(sy.with_loop_gain, dt)
+    gm = gain_interval(sy.with_loop_gain, dt)
     if stable and gm[0] >= 0:
         up = gm[1]
         down = 1.0 / gm[0] if gm[0] > 0 else math.inf
@@ -240,7 +240,7 @@ def analyze_loop(
     return LoopAnalysis(
         lambda1=float(lambda1),
         lambda2=float(lambda2),
-        gains=None if estimator == "state" else tuple(float(v) for v in _as_gains(gains)),
+        gains=None if estimator == "state" else tuple(float(v) for v in as_gains(gains)),
         dt=dt,
         integral_rate=integral_rate,
         form=form,
@@ -340,7 +340,7 @@ def stability_interval(
             lti=False,
             **kw,
         ).A_cl
-        return _stable(A, dt)[0]
+        return stability(A, dt)[0]
 
     if not ok(0.0):
         return (math.nan, math.nan)

@@ -75,7 +75,7 @@ import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize, hysteresis_increment
+from ..model.plant import check_dt, discretize, hysteresis_increment
 
 __all__ = [
     "TrackingController",
@@ -253,7 +253,7 @@ def discrete_error_gains(
     ndarray, shape (2,)
         V per length unit, V per (length unit/s).
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     zoh = discretize(params, dt)
     w0 = math.sqrt(params.a1)
     s = np.array([1.0, 1.0 / w0])
@@ -495,7 +495,7 @@ class DiscreteTrackingController(TrackingController):
             estimate_limits=estimate_limits,
             hysteresis_jump=hysteresis_jump,
         )
-        self.dt = _check_dt(dt)
+        self.dt = check_dt(dt)
         if integral_rate is None:
             self.gains = discrete_error_gains(params, self.lambda1, self.lambda2, self.dt)
         else:
@@ -585,7 +585,7 @@ def discrete_integral_gains(
     ndarray, shape (3,)
         V per length unit, V per (length unit/s), V per (length unit s).
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     zoh = discretize(params, dt)
     w0 = math.sqrt(params.a1)
     s = np.array([1.0, 1.0 / w0, 1.0 / dt])

@@ -46,8 +46,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize
-from ..observers.gains import _as_gains, discrete_gains
+from ..model.plant import check_dt, discretize
+from ..observers.gains import as_gains, discrete_gains
 from .controllers import TrackingController, TuningWarning, make_controller
 
 __all__ = ["loop_systems", "closed_loop_matrix"]
@@ -188,7 +188,7 @@ def loop_systems(
     if dt is None and (form == "discrete" or delay):
         raise InputError("the discrete form and the computation delay need a sample time dt (s)")
     if dt is not None:
-        dt = _check_dt(dt)
+        dt = check_dt(dt)
     tp = params if true_params is None else true_params
     ctrl = _ctrl(params, lambda1, lambda2, form, dt, integral_rate)
     Kx, Kr = ctrl.linear_gains()
@@ -232,7 +232,7 @@ def loop_systems(
             Pst, Ctrl, L, A_cl, Bp.copy(), np.zeros(n), Kr, False, dt, np.outer(Bp, Kst)
         )
 
-    l = _as_gains(gains)
+    l = as_gains(gains)
     if dt is None:
         A0 = np.array([[0.0, 1.0, 0.0], [-params.a1, -params.a2, -params.a1], [0.0, 0.0, 0.0]])
         B0 = s3 * np.array([0.0, params.a3, 0.0])
@@ -288,7 +288,8 @@ def closed_loop_matrix(params: BoucWenParams, lambda1: float, lambda2: float, ga
     return loop_systems(params, lambda1, lambda2, gains, lti=False, **kw).A_cl
 
 
-def _stable(A: np.ndarray, dt: float | None) -> tuple[bool, float]:
+def stability(A: np.ndarray, dt: float | None) -> tuple[bool, float]:
+    """``(stable, spectral abscissa)`` (``dt`` None) or ``(stable, spectral radius)``."""
     ev = np.linalg.eigvals(A)
     if dt is None:
         m = float(np.max(ev.real))
@@ -297,18 +298,18 @@ def _stable(A: np.ndarray, dt: float | None) -> tuple[bool, float]:
     return r < 1, r
 
 
-def _gain_interval(build, dt, *, k_hi: float = 1e4) -> tuple[float, float]:
+def gain_interval(build, dt, *, k_hi: float = 1e4) -> tuple[float, float]:
     """Loop-gain interval around 1 for which the closed loop stays stable."""
-    if not _stable(build(1.0), dt)[0]:
+    if not stability(build(1.0), dt)[0]:
         return (math.nan, math.nan)
 
     def edge(k_out: float) -> float:
         k_in = 1.0
-        if _stable(build(k_out), dt)[0]:
+        if stability(build(k_out), dt)[0]:
             return k_out
         for _ in range(60):
             mid = math.sqrt(k_in * k_out) if k_out > 0 else 0.5 * (k_in + k_out)
-            if _stable(build(mid), dt)[0]:
+            if stability(build(mid), dt)[0]:
                 k_in = mid
             else:
                 k_out = mid
@@ -320,13 +321,13 @@ def _gain_interval(build, dt, *, k_hi: float = 1e4) -> tuple[float, float]:
     grid_up = np.geomspace(1.0, k_hi, 40)[1:]
     hi = k_hi
     for k in grid_up:
-        if not _stable(build(float(k)), dt)[0]:
+        if not stability(build(float(k)), dt)[0]:
             hi = edge(float(k))
             break
     grid_dn = np.geomspace(1.0, 1e-4, 40)[1:]
     lo = 0.0
     for k in grid_dn:
-        if not _stable(build(float(k)), dt)[0]:
+        if not stability(build(float(k)), dt)[0]:
             lo = edge(float(k))
             break
     return (lo, hi)

@@ -10,12 +10,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt
+from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import _as_gains, gains_for_observer
+from ..observers.gains import as_gains, gains_for_observer
 from ..validate import Range, integer
 from .analysis import LoopAnalysis, analyze_loop
-from .systems import LoopSystems, _stable, loop_systems
+from .systems import LoopSystems, loop_systems, stability
 
 __all__ = ["observer_gains", "digital_tuning", "DigitalTuning"]
 
@@ -206,7 +206,7 @@ def _fast_margins(sy: LoopSystems, dt: float, w: np.ndarray) -> tuple[float, flo
     are interpolated linearly on ``w``: a screen, confirmed by :func:`analyze_loop`.
     """
     A_cl, A_in = sy.A_cl, sy.A_in
-    if not _stable(A_cl, dt)[0]:
+    if not stability(A_cl, dt)[0]:
         return None
     i, j = np.unravel_index(np.argmax(np.abs(A_in)), A_in.shape)
     b = A_in[:, j]
@@ -326,7 +326,7 @@ def digital_tuning(
     -------
     DigitalTuning
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     if observer_radius is not None and not 0 < observer_radius < 2:
         raise InputError(f"observer_radius must be in (0, 2), got {observer_radius}")
     if uncertainty is not None and mismatch is not None:
@@ -351,7 +351,7 @@ def digital_tuning(
             except InputError:  # pragma: no cover - a triple real pole is always valid
                 continue
     else:
-        l = _as_gains(gains)
+        l = as_gains(gains)
         ev = np.linalg.eigvals(
             np.array(
                 [

@@ -199,7 +199,7 @@ def discretize(params: BoucWenParams, dt: float) -> ZOHModel:
     return ZOHModel(F=F, g=g, dt=dt)
 
 
-def _check_dt(dt: float) -> float:
+def check_dt(dt: float) -> float:
     """``dt`` (s) as a float in the supported range :data:`bwdesign.validate.DT`."""
     if isinstance(dt, bool) or not isinstance(dt, Real):
         raise InputError(f"dt must be a number of seconds, got {dt!r}")
@@ -237,7 +237,7 @@ def check_sample_time(params: BoucWenParams, dt: float) -> float:
     InputError
         ``dt`` is not a number, not finite, or outside either range.
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     sigma = slowest_decay(params)
     if sigma * dt > MAX_DECAY_DT:
         label = params.name or "the plant"

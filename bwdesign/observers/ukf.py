@@ -43,14 +43,14 @@ import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import _check_dt, discretize, zoh_step
+from ..model.plant import check_dt, discretize, zoh_step
 from .base import (
-    _check_params,
-    _finite_scalar,
-    _inputs,
-    _measurements,
-    _require_finite_state,
-    _state,
+    as_inputs,
+    as_measurements,
+    check_params,
+    finite_scalar,
+    require_finite_state,
+    state_vector,
 )
 
 __all__ = ["UnscentedObserver", "default_noise", "max_hysteresis_slope"]
@@ -91,7 +91,7 @@ def default_noise(
     P0 : ndarray, shape (3, 3)
         ``diag(h_max^2, a1 h_max^2, h_max^2)``.
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     udot_max = _positive(udot_max, "udot_max (V/s)")
     noise_std = _positive(noise_std, "noise_std (length unit)")
     s_h = max_hysteresis_slope(params) * udot_max * dt
@@ -204,10 +204,10 @@ class UnscentedObserver:
         # filterpy pulls in scipy.stats (~0.4 s): imported here, not with bwdesign
         from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-        _check_params(params, "UnscentedObserver")
+        check_params(params, "UnscentedObserver")
         require_bounded(params, allow_unbounded)
         self.params = params
-        self.dt = _check_dt(dt)
+        self.dt = check_dt(dt)
         if Q is None and udot_max is None:
             raise InputError(
                 "UnscentedObserver: give udot_max (V/s, the input-rate envelope) for the "
@@ -240,13 +240,13 @@ class UnscentedObserver:
     # -- state -------------------------------------------------------------
     def reset(self, x0: Any = None, *, u_prev: float = 0.0, P0: Any = None) -> None:
         """Restart from ``x0`` (default zeros) and ``P0`` (default: the constructor's)."""
-        x = np.zeros(3) if x0 is None else _state(x0, "x0")
+        x = np.zeros(3) if x0 is None else state_vector(x0, "x0")
         P = self._P0 if P0 is None else _matrix(P0, (3, 3), "P0")
         f = self.ukf
         f.x, f.P = x, P.copy()
         f.x_prior, f.P_prior = x.copy(), P.copy()
         f.x_post, f.P_post = x.copy(), P.copy()
-        self.u_prev = _finite_scalar(u_prev, "u_prev")
+        self.u_prev = finite_scalar(u_prev, "u_prev")
         self.y = 0.0
         self.z: float | None = None
 
@@ -257,7 +257,7 @@ class UnscentedObserver:
 
     @x.setter
     def x(self, value: Any) -> None:
-        self.ukf.x = _state(value, "x")
+        self.ukf.x = state_vector(value, "x")
 
     @property
     def P(self) -> np.ndarray:
@@ -327,8 +327,8 @@ class UnscentedObserver:
     # -- filtering ---------------------------------------------------------
     def predict(self, u: float) -> None:
         """Propagate the sigma points one sample with ``u`` (V) held (exact plant step)."""
-        u = _finite_scalar(u, "u")
-        _require_finite_state(self.ukf.x, "UnscentedObserver")
+        u = finite_scalar(u, "u")
+        require_finite_state(self.ukf.x, "UnscentedObserver")
         self.ukf.predict(u_prev=self.u_prev, u=u)
         self.u_prev = u
 
@@ -338,8 +338,8 @@ class UnscentedObserver:
             self.ukf.update(None)
             self.z, self.y = None, 0.0
             return
-        z = _finite_scalar(z, "z")
-        _require_finite_state(self.ukf.x, "UnscentedObserver")
+        z = finite_scalar(z, "z")
+        require_finite_state(self.ukf.x, "UnscentedObserver")
         self.ukf.update(np.array([z]))
         self.z, self.y = z, float(self.ukf.y[0])
 
@@ -358,12 +358,12 @@ class UnscentedObserver:
         ndarray, shape (N, 3)
             Posterior estimates at ``t_1 .. t_N``.
         """
-        ul = _inputs(us)
-        zl = _measurements(zs, len(ul))
+        ul = as_inputs(us)
+        zl = as_measurements(zs, len(ul))
         out = np.empty((len(ul), 3))
         f = self.ukf
         if ul:
-            _require_finite_state(f.x, "UnscentedObserver")
+            require_finite_state(f.x, "UnscentedObserver")
         up = self.u_prev
         for k, (uk, zk) in enumerate(zip(ul, zl, strict=True)):
             f.predict(u_prev=up, u=uk)
