@@ -22,17 +22,6 @@ __all__ = ["continuous_equivalent", "sector_interval", "rho_interval"]
 # -- model pieces ---------------------------------------------------------------
 
 
-def _rate(value: float, name: str, *, positive: bool) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-        raise InputError(f"{name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or (value <= 0 if positive else value < 0):
-        raise InputError(
-            f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value}"
-        )
-    return value
-
-
 def model_matrix(params: BoucWenParams) -> np.ndarray:
     """The observer's model matrix ``A0`` (state ``(x1, x2, x3)``)."""
     return np.array([[0.0, 1.0, 0.0], [-params.a1, -params.a2, -params.a1], [0.0, 0.0, 0.0]])

@@ -29,7 +29,6 @@ K_HAT_CAP = 1e3
 MARGIN_SENSE = "passed means value < limit (slack = limit - value > 0)"
 
 UNIT_ROUNDOFF = float(np.finfo(float).eps) / 2  # unit round-off
-_E3 = np.array([0.0, 0.0, 1.0])
 OUTPUT_ROW = np.array([1.0, 0.0, 0.0])
 
 

@@ -107,7 +107,6 @@ from .checks import (
 from .frequency import continuous_family, sampled_family
 from .results import (
     BISECT_RTOL,
-    K_HAT_CAP,
     TIERS,
     UNIT_ROUNDOFF,
     CertificateReport,
@@ -193,11 +192,6 @@ def largest_decay(pred: Callable[[float], bool], cap: float, rtol: float = BISEC
         else:
             hi = mid
     return lo
-
-
-def _search_cap(params: BoucWenParams) -> float:
-    c = lipschitz_coefficient(params)
-    return K_HAT_CAP * math.sqrt(params.a1) / c if c > 0 else math.inf
 
 
 def _stated_envelope(envelope: float, decay: float, claims: Claims) -> tuple[float | None, bool]:
