@@ -220,7 +220,7 @@ BAD = [
     ("delay without dt", dict(delay=True), "need a sample time"),
     ("unknown form", dict(form="zoh"), "form must be"),
     ("unknown estimator", dict(estimator="kalman"), "estimator must be"),
-    ("negative dt", dict(dt=-1.0), "dt must be"),
+    ("negative dt", dict(dt=-1.0), r"dt \(s\) = -1 is outside"),
     ("bad gains", dict(gains=(1.0, 2.0)), "three numbers"),
 ]
 

@@ -62,6 +62,7 @@ from ..observers.gains import (
     disturbance_discrete_gains,
     error_matrix,
 )
+from ..validate import DECAY, UDOT_BOUND, Range, real
 from .checks import negdef, posdef, rho_interval, sector_interval
 from .results import Margin
 
@@ -73,6 +74,8 @@ __all__ = [
 ]
 
 _EW, _ETA = 2, 3
+#: Nominal decay rate a synthesis aims for (1/s): :data:`~bwdesign.validate.DECAY` without 0.
+POSITIVE_DECAY = Range(0.0, DECAY.hi, lo_open=True, unit=DECAY.unit)
 
 
 @dataclass(frozen=True)
@@ -171,9 +174,7 @@ def _problem(
 ) -> _Problem:
     if not isinstance(params, BoucWenParams):
         raise InputError(f"params must be a BoucWenParams, got {type(params).__name__}")
-    udot_max = float(udot_max)
-    if not (math.isfinite(udot_max) and udot_max >= 0):
-        raise InputError(f"udot_max must be a finite rate >= 0 (V/s), got {udot_max}")
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_BOUND)
     if dt is None:
         if discrete_K is not None:
             raise InputError("discrete gains K need dt (the sampled tier)")
@@ -368,12 +369,8 @@ def synthesize_disturbance(
     from . import lmi
 
     dt = check_dt(dt)
-    decay = float(decay)
-    if not (math.isfinite(decay) and decay > 0):
-        raise InputError(f"decay must be a finite rate > 0 (1/s), got {decay}")
-    udot_max = float(udot_max)
-    if not (math.isfinite(udot_max) and udot_max >= 0):
-        raise InputError(f"udot_max must be a finite rate >= 0 (V/s), got {udot_max}")
+    decay = real(decay, "decay (1/s)", within=POSITIVE_DECAY)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_BOUND)
     rho_lo, rho_hi = rho_interval(params, udot_max, dt)
     if rho_hi > 1.0:
         return (

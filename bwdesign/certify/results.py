@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..model.params import BoucWenParams
+from ..validate import Range
 
 __all__ = ["TIERS", "Margin", "TierCertificate", "CertificateReport", "SynthesisResult"]
 
@@ -27,6 +28,9 @@ K_HAT_CAP = 1e3
 
 #: The one sign convention of every :class:`Margin` (stated in its JSON).
 MARGIN_SENSE = "passed means value < limit (slack = limit - value > 0)"
+
+#: A contraction factor per sample of the robust certificates: ``0 < a < 1``.
+CONTRACTION = Range(0.0, 1.0, lo_open=True, hi_open=True)
 
 UNIT_ROUNDOFF = float(np.finfo(float).eps) / 2  # unit round-off
 OUTPUT_ROW = np.array([1.0, 0.0, 0.0])

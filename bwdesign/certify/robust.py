@@ -112,10 +112,10 @@ from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_disturbance_gains, check_gains, discrete_gains
-from ..validate import UDOT_MAX, below_nyquist, real
+from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction, solution
-from .results import Margin
+from .results import CONTRACTION, Margin
 
 __all__ = ["RobustCertificate", "certify_robust"]
 
@@ -322,9 +322,7 @@ def certify_robust(
     require_bounded(params)
     dt = check_sample_time(params, dt)
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
-    noise_max = float(noise_max)
-    if not (math.isfinite(noise_max) and noise_max >= 0):
-        raise InputError(f"noise_max must be finite and >= 0, got {noise_max}")
+    noise_max = real(noise_max, "noise_max", within=NONNEGATIVE)
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError("uncertainty must be an UncertaintyBox")
     if not isinstance(reference, Reference):
@@ -592,9 +590,7 @@ def certify_robust(
             best = min(ok, key=lambda v: v[2])
         sol, av = (best[0], best[1]) if best else (None, math.nan)
     else:
-        av = float(a)
-        if not 0 < av < 1:
-            raise InputError(f"a must be in (0, 1), got {av}")
+        av = real(a, "a", within=CONTRACTION)
         sol = attempt(av, c_track)
     if sol is None or not sol.ok:
         status = sol.status if sol is not None else "infeasible for every contraction tried"

@@ -67,10 +67,10 @@ from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import as_gains, check_gains, discrete_gains
-from ..validate import POLE_RADIUS, UDOT_MAX, real
+from ..validate import NONNEGATIVE, POLE_RADIUS, SIGNAL, UDOT_MAX, integer, real
 from .checks import continuous_equivalent, rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction
-from .results import Margin
+from .results import CONTRACTION, Margin
 
 __all__ = [
     "RobustObserverCertificate",
@@ -252,9 +252,7 @@ def _problem(
 ) -> _Problem:
     require_bounded(params)
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
-    noise_max = float(noise_max)
-    if not (math.isfinite(noise_max) and noise_max >= 0):
-        raise InputError(f"noise_max must be finite and >= 0, got {noise_max}")
+    noise_max = real(noise_max, "noise_max", within=NONNEGATIVE)
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError("uncertainty must be an UncertaintyBox")
     bad = uncertainty.undetermined()
@@ -264,13 +262,14 @@ def _problem(
             "give a finite range in [uncertainty] for a robust certificate"
         )
     try:
-        u_lo, u_hi = (float(v) for v in input_range)
+        u_lo, u_hi = input_range
     except (TypeError, ValueError):
         raise InputError(f"input_range must be (u_lo, u_hi), got {input_range!r}") from None
-    if not (math.isfinite(u_lo) and math.isfinite(u_hi) and u_lo < u_hi):
+    u_lo = real(u_lo, "input_range u_lo (V)", within=SIGNAL)
+    u_hi = real(u_hi, "input_range u_hi (V)", within=SIGNAL)
+    if not u_lo < u_hi:
         raise InputError(f"input_range must be finite with u_lo < u_hi, got {input_range!r}")
-    if isinstance(interior_samples, bool) or not isinstance(interior_samples, int):
-        raise InputError(f"interior_samples must be an integer >= 0, got {interior_samples!r}")
+    interior_samples = integer(interior_samples, "interior_samples", within=NONNEGATIVE)
     vertices = uncertainty.vertices(params)
     interior = uncertainty.sample(params, np.random.default_rng(seed), interior_samples)
     rho = rho_interval(params, udot_max, dt)
@@ -412,9 +411,7 @@ def _certify_K(pb: _Problem, K: np.ndarray, a: float | None) -> RobustObserverCe
         ok = [v for v in cache.values() if v[0].ok]
         sol, av = min(ok, key=lambda v: v[2])[:2] if ok else (None, math.nan)
     else:
-        av = float(a)
-        if not 0 < av < 1:
-            raise InputError(f"a must be in (0, 1), got {av}")
+        av = real(a, "a", within=CONTRACTION)
         sol = attempt(av, targets["x1"])
     if sol is None or not sol.ok:
         why = sol.status if sol is not None else "infeasible for every contraction tried"

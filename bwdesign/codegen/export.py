@@ -52,7 +52,7 @@ from ..certify.synthesis import synthesize as synthesize_gains
 from ..certify.tiers import certify, certify_discrete
 from ..control.controllers import DiscreteTrackingController
 from ..control.tuning import digital_tuning
-from ..errors import ConfigError, InputError, NotCertifiedError
+from ..errors import ConfigError, InputError, InternalError, NotCertifiedError
 from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.plant import discretize
@@ -116,7 +116,7 @@ def _fill(name: str, **values: Any) -> str:
     try:
         return _template(name).substitute(values)
     except KeyError as err:  # a template asks for a value the exporter does not give
-        raise RuntimeError(f"template {name}: no value for ${err.args[0]}") from None
+        raise InternalError(f"template {name}: no value for ${err.args[0]}") from None
 
 
 def _check_prefix(prefix: str) -> str:

@@ -13,7 +13,7 @@ from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import as_gains, gains_for_observer
-from ..validate import Range, integer
+from ..validate import POSITIVE, Range, integer, real
 from .analysis import LoopAnalysis, analyze_loop
 from .systems import LoopSystems, loop_systems, stability
 
@@ -243,6 +243,10 @@ def _fast_margins(sy: LoopSystems, dt: float, w: np.ndarray) -> tuple[float, flo
 
 
 _RADII = (0.1, 0.16, 0.25, 0.4, 0.63, 1.0, 1.6)
+#: Observer bandwidth times dt: the poles ``-radius/dt`` stay inside the sampled loop's reach.
+OBSERVER_RADIUS = Range(0.0, 2.0, lo_open=True, hi_open=True)
+#: Relative model error the tuning designs for.
+MISMATCH = Range(0.0, 0.5, hi_open=True)
 
 
 def digital_tuning(
@@ -327,18 +331,17 @@ def digital_tuning(
     DigitalTuning
     """
     dt = check_dt(dt)
-    if observer_radius is not None and not 0 < observer_radius < 2:
-        raise InputError(f"observer_radius must be in (0, 2), got {observer_radius}")
+    if observer_radius is not None:
+        observer_radius = real(observer_radius, "observer_radius", within=OBSERVER_RADIUS)
     if uncertainty is not None and mismatch is not None:
         raise InputError("give mismatch or uncertainty, not both")
     if uncertainty is not None and not isinstance(uncertainty, UncertaintyBox):
         raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
     if mismatch is None:
         mismatch = 0.0 if uncertainty is not None else 0.02
-    if not 0 <= mismatch < 0.5:
-        raise InputError(f"mismatch must be a relative error in [0, 0.5), got {mismatch}")
-    if integral_ratio is not None and not integral_ratio > 0:
-        raise InputError(f"integral_ratio must be > 0 or None, got {integral_ratio}")
+    mismatch = real(mismatch, "mismatch (relative error)", within=MISMATCH)
+    if integral_ratio is not None:
+        integral_ratio = real(integral_ratio, "integral_ratio", within=POSITIVE)
     n_candidates = integer(n_candidates, "n_candidates", within=Range(1, 10_000))
     # observers to try: (omega_o, gains)
     if gains is None:

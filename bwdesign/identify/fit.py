@@ -40,6 +40,7 @@ from scipy.optimize import least_squares
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
+from ..validate import Range, integer
 from .data import IdentificationData
 from .problem import IA, IB, IE1, IE2, IK, IOFF, IQ, ITAU, IW, IZ, Q_MAX, Problem, theta_from_params
 from .result import IdentificationResult, build_result
@@ -50,6 +51,8 @@ NAMES = ("a1", "a2", "a3", "alpha", "beta", "gamma")
 #: A coordinate is "determined" when its 95 % half-width is below this fraction.
 DETERMINED_REL = 0.5
 _DELAYS = (0, 1, 2, 3)
+#: Supported number of refinements of the fit (the derived start counts as one).
+MULTISTART = Range(1, math.inf)
 #: Least share of the input's power within a third and three times the fitted
 #: resonance for the resonance to count as seen (besides a tight interval).
 MIN_BAND_FRACTION = 1e-5
@@ -298,8 +301,7 @@ def identify(
             f"validation record is sampled at {validation.dt:.6g} s, the training record at "
             f"{data.dt:.6g} s: they must share the sample time"
         )
-    if isinstance(multistart, bool) or not isinstance(multistart, int) or multistart < 1:
-        raise InputError(f"multistart must be an integer >= 1, got {multistart!r}")
+    multistart = integer(multistart, "multistart", within=MULTISTART)
     tic = time.perf_counter()
     prior = _resolve_init(init)
     free = _free_mask(fixed, prior)

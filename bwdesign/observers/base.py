@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import numbers
 from typing import Any
 
 import numpy as np
@@ -11,12 +10,13 @@ import numpy as np
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_dt, discretize, hysteresis_increment
+from ..validate import real
 from .dynamics import observer_iosystem
 from .gains import C, as_gains, check_gains, discrete_gains, schur_margin
 
 
 def finite_scalar(v: Any, name: str) -> float:
-    """``v`` as a finite float.
+    """``v`` as a finite float (:func:`bwdesign.validate.real`).
 
     Accepted: any ``numbers.Real`` (python and numpy integers and floats) and a
     numeric array of size 1 (filterpy's ``z`` of shape (1,)). Refused with
@@ -25,20 +25,16 @@ def finite_scalar(v: Any, name: str) -> float:
     """
     if isinstance(v, bool | np.bool_):
         raise InputError(f"{name} must be a number, got the boolean {v!r}")
-    if isinstance(v, numbers.Real):
-        f = float(v)
-    elif isinstance(v, np.ndarray | list | tuple):
+    if isinstance(v, np.ndarray | list | tuple):
         a = np.asarray(v)
         if a.dtype.kind not in "fiu":
             raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
         if a.size != 1:
             raise InputError(f"{name} must be a single number, got shape {a.shape}")
-        f = float(a.reshape(()))
-    else:
-        raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
-    if not math.isfinite(f):
-        raise InputError(f"{name} must be finite, got {f}")
-    return f
+        v = a.reshape(()).item()
+    elif isinstance(v, np.generic):
+        v = v.item()  # a python number, so that messages print it as python does
+    return real(v, name)
 
 
 _WORDS = {3: "three", 4: "four"}

@@ -35,8 +35,6 @@ Default noise model (:func:`default_noise`), for a plant in length unit L
 from __future__ import annotations
 
 import functools
-import math
-import numbers
 from typing import Any
 
 import numpy as np
@@ -44,6 +42,7 @@ import numpy as np
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_dt, discretize, zoh_step
+from ..validate import POSITIVE, UDOT_MAX, real
 from .base import (
     as_inputs,
     as_measurements,
@@ -92,8 +91,8 @@ def default_noise(
         ``diag(h_max^2, a1 h_max^2, h_max^2)``.
     """
     dt = check_dt(dt)
-    udot_max = _positive(udot_max, "udot_max (V/s)")
-    noise_std = _positive(noise_std, "noise_std (length unit)")
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+    noise_std = real(noise_std, "noise_std (length unit)", within=POSITIVE)
     s_h = max_hysteresis_slope(params) * udot_max * dt
     g = discretize(params, dt).F[:, 2]
     Q = s_h**2 * np.outer(g, g)
@@ -102,15 +101,6 @@ def default_noise(
     h = verdict.h_max if verdict.bounded else params.alpha
     P0 = np.diag([h**2, params.a1 * h**2, h**2])
     return Q, R, P0
-
-
-def _positive(v: Any, name: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, numbers.Real):
-        raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
-    v = float(v)
-    if not math.isfinite(v) or v <= 0:
-        raise InputError(f"{name} must be a finite number > 0, got {v}")
-    return v
 
 
 def _matrix(M: Any, shape: tuple[int, int], name: str) -> np.ndarray:
@@ -220,8 +210,10 @@ class UnscentedObserver:
                 udot_max=1.0 if udot_max is None else udot_max,
                 noise_std=noise_std,
             )
-        self.udot_max = None if udot_max is None else _positive(udot_max, "udot_max (V/s)")
-        self.noise_std = _positive(noise_std, "noise_std (length unit)")
+        self.udot_max = (
+            None if udot_max is None else real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+        )
+        self.noise_std = real(noise_std, "noise_std (length unit)", within=POSITIVE)
         if points is None:
             points = MerweScaledSigmaPoints(3, alpha=1.0, beta=2.0, kappa=0.0)
         self.ukf = UnscentedKalmanFilter(

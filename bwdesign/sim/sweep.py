@@ -37,7 +37,7 @@ import numpy as np
 
 from .. import interrupts
 from ..control.controllers import TrackingController
-from ..errors import BWDesignError, InputError, UnboundedModelError
+from ..errors import BWDesignError, InputError, SweepError, UnboundedModelError
 from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
@@ -93,10 +93,6 @@ _ADDRESS = re.compile(
     r"(?:(?P<scheme>tcp|tls)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?)"
     r":(?P<port>[0-9]{1,5})/?"
 )
-
-
-class SweepError(BWDesignError, RuntimeError):
-    """A sweep could not be completed (a chunk failed after its retries, no scheduler)."""
 
 
 @dataclass(frozen=True)
