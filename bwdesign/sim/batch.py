@@ -31,7 +31,8 @@ import numpy as np
 from ..control.controllers import TrackingController
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import check_dt, discretize
+from ..model.plant import check_dt as _check_dt
+from ..model.plant import discretize
 from ..model.references import Reference
 from ..observers.gains import (
     check_disturbance_gains,
@@ -257,7 +258,7 @@ def simulate_batch(
         if not isinstance(tp, BoucWenParams):
             raise InputError(f"true_params[{i}] must be a BoucWenParams")
         require_bounded(tp, allow_unbounded)
-    dt = check_dt(dt)
+    dt = _check_dt(dt)
     below_nyquist(reference, dt)
     duration = _finite_nonneg(duration, "duration (s)")
     n = int(round(duration / dt))

@@ -15,7 +15,8 @@ from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize, hysteresis_increment
 from ..model.references import Reference
-from ..observers.gains import as_gains, check_disturbance_gains, check_gains
+from ..observers.gains import as_gains as _as_gains
+from ..observers.gains import check_disturbance_gains, check_gains
 from ..observers.sampled import (
     DisturbanceHysteresisObserver,
     ExtendedStateObserver,
@@ -422,7 +423,7 @@ def simulate(
     if isinstance(observer, str) and observer not in ("phso", "eso", "phdo", "ukf"):
         raise InputError(f"observer must be 'phso', 'eso', 'phdo' or 'ukf', got {observer!r}")
     if gains is not None:
-        gains = check_disturbance_gains(params, gains) if observer == "phdo" else as_gains(gains)
+        gains = check_disturbance_gains(params, gains) if observer == "phdo" else _as_gains(gains)
     if isinstance(observer, str) and observer in ("phso", "eso", "phdo"):
         if gains is None:
             names = "l1, l2, l3, l4" if observer == "phdo" else "l1, l2, l3"

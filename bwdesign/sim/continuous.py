@@ -9,7 +9,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import check_dt, hysteresis_increment
+from ..model.plant import check_dt as _check_dt
+from ..model.plant import hysteresis_increment
 from ..model.references import Reference, Triangle
 from ..observers.gains import check_gains
 from .closed_loop import _controller, _finish, _finite_nonneg, _state
@@ -172,7 +173,7 @@ def simulate_continuous(
     T = reference.period or duration
     if output_dt is None:
         output_dt = min(T, duration) / 5000.0
-    output_dt = check_dt(output_dt)
+    output_dt = _check_dt(output_dt)
     if max_step is None:
         max_step = output_dt
     wc = None
