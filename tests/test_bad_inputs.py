@@ -37,7 +37,7 @@ from bwdesign.certify.disturbance import certify_disturbance
 from bwdesign.certify.robust_observer import certify_robust_observer
 from bwdesign.cli.main import main
 from bwdesign.control.controllers import TrackingController
-from bwdesign.control.tuning import digital_tuning
+from bwdesign.control.tuning import MarginRequirements, digital_tuning
 from bwdesign.errors import ConfigError, GainError, InputError, ParameterError
 from bwdesign.extras import require
 from bwdesign.identify import IdentificationData, identify, load_data
@@ -570,6 +570,12 @@ PYTHON += [
         lambda: digital_tuning(P, 2e-4, mismatch=0.7),
         InputError,
         r"mismatch \(relative error\) = 0.7 is outside the supported range \[0, 0.5\)",
+    ),
+    (
+        "digital_tuning margins.phase_deg nan",
+        lambda: digital_tuning(P, 2e-4, margins=MarginRequirements(phase_deg=math.nan)),
+        InputError,
+        "margins.phase_deg deg must be finite",
     ),
     (
         "digital_tuning observer_radius str",
