@@ -626,8 +626,6 @@ def synthesize_robust_observer(
     -------
     RobustObserverSynthesis
     """
-    from . import lmi
-
     if target not in ("x1", "x3"):
         raise InputError(f"target must be 'x1' or 'x3', got {target!r}")
     dt = check_sample_time(params, dt)
@@ -651,20 +649,7 @@ def synthesize_robust_observer(
             False, None, None, None, target, None, f"not certified: {why}"
         )
     T = np.array([1.0, math.sqrt(params.a1), 1.0])
-    Fs = pb.F * T[None, :] / T[:, None]
-    Bs = pb.Bw / T[:, None]
-    c = T * (_C if target == "x1" else np.eye(3)[2])
-    cache: dict[float, Any] = {}
-
-    def f(x: float) -> float:
-        if x not in cache:
-            sol = lmi.robust_observer_synthesis(
-                Fs, Bs, c, rho=pb.rho, a=1 - math.exp(x), noise=pb.noise, disk=disk
-            )
-            cache[x] = (sol, sol.objective if sol.ok else math.inf, 1 - math.exp(x))
-        return cache[x][1]
-
-    search_log_contraction(f, [math.log(1 - a) for a in _GRID], 5)
+    cache = _synthesis_lmis(pb, T, target, disk)
     ok = [v for v in cache.values() if v[0].ok]
     if not ok:
         last = next(iter(cache.values()))[0]
@@ -684,22 +669,7 @@ def synthesize_robust_observer(
     P = np.asarray(sol["P"])
     Ks = np.linalg.solve((P + P.T) / 2, np.asarray(sol["Y"]).reshape(3))
     K = tuple(float(f"{v:.10g}") for v in T * Ks)
-    with warnings.catch_warnings():  # logm's accuracy note: the result is verified anyway
-        warnings.simplefilter("ignore", RuntimeWarning)
-        gains = continuous_equivalent(params, K, dt)
-    try:
-        if gains is not None:
-            cert = certify_robust_observer(params, gains, **opts)
-        else:
-            cert = certify_robust_observer(params, discrete=K, **opts)
-    except GainError as err:  # continuous equivalent outside the Hurwitz conditions (4)
-        gains = None
-        cert = certify_robust_observer(params, discrete=K, **opts)
-        note = f" (its continuous equivalent is not admissible: {err})"
-    else:
-        note = (
-            "" if gains is not None else "; the discrete poles have no exact continuous equivalent"
-        )
+    gains, cert, note = _recertify(params, K, opts)
     bound = (
         None
         if not cert.holds
@@ -722,3 +692,57 @@ def synthesize_robust_observer(
         solver=sol.solver,
         status=sol.status,
     )
+
+
+def _synthesis_lmis(
+    pb: _Problem, T: np.ndarray, target: str, disk: tuple[float, float] | None
+) -> dict[float, Any]:
+    """The synthesis LMI over the contraction search: ``{log(1 - a): (sol, objective, a)}``.
+
+    Solved in the state scaling ``T = diag(1, sqrt(a1), 1)``; the objective is the
+    squared peak of the ``target`` error (``inf`` where the solve failed).
+    """
+    from . import lmi
+
+    Fs = pb.F * T[None, :] / T[:, None]
+    Bs = pb.Bw / T[:, None]
+    c = T * (_C if target == "x1" else np.eye(3)[2])
+    cache: dict[float, Any] = {}
+
+    def f(x: float) -> float:
+        if x not in cache:
+            sol = lmi.robust_observer_synthesis(
+                Fs, Bs, c, rho=pb.rho, a=1 - math.exp(x), noise=pb.noise, disk=disk
+            )
+            cache[x] = (sol, sol.objective if sol.ok else math.inf, 1 - math.exp(x))
+        return cache[x][1]
+
+    search_log_contraction(f, [math.log(1 - a) for a in _GRID], 5)
+    return cache
+
+
+def _recertify(
+    params: BoucWenParams, K: tuple[float, ...], opts: dict[str, Any]
+) -> tuple[np.ndarray | None, RobustObserverCertificate, str]:
+    """``(continuous gains or None, certificate, note)`` of the rounded synthesised ``K``.
+
+    Certified with its exact continuous equivalent when one exists and is admissible,
+    else with ``discrete=K``.
+    """
+    with warnings.catch_warnings():  # logm's accuracy note: the result is verified anyway
+        warnings.simplefilter("ignore", RuntimeWarning)
+        gains = continuous_equivalent(params, K, opts["dt"])
+    try:
+        if gains is not None:
+            cert = certify_robust_observer(params, gains, **opts)
+        else:
+            cert = certify_robust_observer(params, discrete=K, **opts)
+    except GainError as err:  # continuous equivalent outside the Hurwitz conditions (4)
+        gains = None
+        cert = certify_robust_observer(params, discrete=K, **opts)
+        note = f" (its continuous equivalent is not admissible: {err})"
+    else:
+        note = (
+            "" if gains is not None else "; the discrete poles have no exact continuous equivalent"
+        )
+    return gains, cert, note

@@ -642,29 +642,9 @@ def certify(
         dt = check_sample_time(params, dt)
     gains = tuple(check_gains(params, gains).tolist())
     if uncertainty is not None:
-        if dt is None or input_range is None:
-            raise InputError(
-                "a robust certificate over the uncertainty box needs the sample time dt (s) "
-                "and the input range (u_lo, u_hi)"
-            )
-        if not isinstance(uncertainty, UncertaintyBox):
-            raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
-        bad = uncertainty.undetermined()
-        if bad:
-            raise InputError(
-                f"[uncertainty] {', '.join(bad)}: half-width not determined (inf); give a "
-                "finite range for a robust certificate"
-            )
+        _check_robust_request(uncertainty, dt, input_range)
     sc = scale_continuous(params, error_matrix(params, gains))
-    if tiers is None:
-        wanted = TIERS if dt is not None else TIERS[:3]
-    else:
-        wanted = tuple(tiers) if not isinstance(tiers, str) else (tiers,)
-        unknown = [t for t in wanted if t not in TIERS]
-        if unknown:
-            raise InputError(f"unknown tier(s) {unknown}; tiers are {', '.join(TIERS)}")
-        if "sampled" in wanted and dt is None:
-            raise InputError("the sampled tier needs the sample time dt (s)")
+    wanted = _wanted_tiers(tiers, dt)
     certs = []
     prev: dict[str, TierCertificate] = {}
     for name in TIERS:
@@ -697,6 +677,38 @@ def certify(
         certificates=tuple(certs),
         robust=robust,
     )
+
+
+def _check_robust_request(
+    uncertainty: Any, dt: float | None, input_range: tuple[float, float] | None
+) -> None:
+    """A robust certificate needs ``dt``, the input range and a box of finite half-widths."""
+    if dt is None or input_range is None:
+        raise InputError(
+            "a robust certificate over the uncertainty box needs the sample time dt (s) "
+            "and the input range (u_lo, u_hi)"
+        )
+    if not isinstance(uncertainty, UncertaintyBox):
+        raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
+    bad = uncertainty.undetermined()
+    if bad:
+        raise InputError(
+            f"[uncertainty] {', '.join(bad)}: half-width not determined (inf); give a "
+            "finite range for a robust certificate"
+        )
+
+
+def _wanted_tiers(tiers: Sequence[str] | str | None, dt: float | None) -> tuple[str, ...]:
+    """The tiers asked for (default: every tier, ``sampled`` only with ``dt``)."""
+    if tiers is None:
+        return TIERS if dt is not None else TIERS[:3]
+    wanted = tuple(tiers) if not isinstance(tiers, str) else (tiers,)
+    unknown = [t for t in wanted if t not in TIERS]
+    if unknown:
+        raise InputError(f"unknown tier(s) {unknown}; tiers are {', '.join(TIERS)}")
+    if "sampled" in wanted and dt is None:
+        raise InputError("the sampled tier needs the sample time dt (s)")
+    return wanted
 
 
 def certify_discrete(

@@ -217,24 +217,7 @@ def analyze_loop(
         gm_db = 20 * math.log10(min(up, down))
     else:
         gm_db = math.nan
-    pm, wc = math.nan, math.nan
-    import control
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # python-control's 'poly'->'frd' note
-            # 'frd' directly for sampled loops (python-control's 'poly' step fails on them and
-            # falls back anyway); 'best' for continuous loops ('frd' needs a grid there)
-            method = "frd" if dt else "best"
-            _, pms, _, _, wgc, _ = control.stability_margins(sy.loop, returnall=True, method=method)
-        pms = np.atleast_1d(np.asarray(pms, dtype=float))
-        wgc = np.atleast_1d(np.asarray(wgc, dtype=float))
-        ok = np.isfinite(pms) & np.isfinite(wgc)
-        if np.any(ok):
-            i = int(np.argmin(np.abs(np.where(ok, pms, np.inf))))
-            pm, wc = float(pms[i]), float(wgc[i])
-    except Exception:  # python-control may fail on degenerate loops; margins stay nan
-        pass
+    pm, wc = _phase_margin(sy.loop, dt)
     ok_dm = math.isfinite(pm) and pm > 0 and math.isfinite(wc) and wc > 0
     dm = math.radians(pm) / wc if ok_dm else math.nan
     return LoopAnalysis(
@@ -304,6 +287,29 @@ class MismatchSweep:
             "phase_margin_deg": self.phase_margin.tolist(),
             "stability_interval": list(self.interval),
         }
+
+
+def _phase_margin(loop: Any, dt: float | None) -> tuple[float, float]:
+    """``(phase margin deg, crossover rad/s)`` nearest -1 of the broken loop (nan when none)."""
+    pm, wc = math.nan, math.nan
+    import control
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # python-control's 'poly'->'frd' note
+            # 'frd' directly for sampled loops (python-control's 'poly' step fails on them and
+            # falls back anyway); 'best' for continuous loops ('frd' needs a grid there)
+            method = "frd" if dt else "best"
+            _, pms, _, _, wgc, _ = control.stability_margins(loop, returnall=True, method=method)
+        pms = np.atleast_1d(np.asarray(pms, dtype=float))
+        wgc = np.atleast_1d(np.asarray(wgc, dtype=float))
+        ok = np.isfinite(pms) & np.isfinite(wgc)
+        if np.any(ok):
+            i = int(np.argmin(np.abs(np.where(ok, pms, np.inf))))
+            pm, wc = float(pms[i]), float(wgc[i])
+    except Exception:  # python-control may fail on degenerate loops; margins stay nan
+        pass
+    return pm, wc
 
 
 def _perturbed(params: BoucWenParams, parameter: str, delta: float) -> BoucWenParams:

@@ -221,30 +221,11 @@ def loop_systems(
     if estimator == "state":
         if delay or integral:
             raise InputError("the state-feedback comparison is defined without delay or integrator")
-        Kst = Kxs[:2]  # u = Kx[:2] x (+ a1/a3 x3: a disturbance feed-through)
-        Ctrl = Pst = L = None
-        if lti:
-            Ctrl = control.ss([], [], [], Kst[None, :], ts)
-            Pst = control.ss(Ap, Bp[:, None], np.eye(2), 0.0, ts)
-            L = control.ss(Ap, Bp[:, None], -Kst[None, :], 0.0, ts)
-        A_cl = Ap + np.outer(Bp, Kst)
-        return LoopSystems(
-            Pst, Ctrl, L, A_cl, Bp.copy(), np.zeros(n), Kr, False, dt, np.outer(Bp, Kst)
-        )
+        return _state_feedback(Ap, Bp, Kxs, Kr, dt, lti)
 
     l = as_gains(gains)
     if dt is None:
-        A0 = np.array([[0.0, 1.0, 0.0], [-params.a1, -params.a2, -params.a1], [0.0, 0.0, 0.0]])
-        B0 = s3 * np.array([0.0, params.a3, 0.0])
-        A0 = s3[:, None] * A0 / s3[None, :]
-        ls = s3 * l
-        # xhat' = (A0 - l C) xhat + B0 u + l y ; u = Kx xhat
-        Ac = A0 - np.outer(ls, _C3) + np.outer(B0, Kxs)
-        Bc = ls[:, None]
-        Cc = Kxs[None, :]
-        Dc = np.zeros((1, 1))
-        b_ff = B0
-        b_int = np.zeros(3)
+        Ac, Bc, Cc, Dc, b_ff, b_int = _continuous_controller(params, l, s3, Kxs)
         ref_advance = False
         plant_ff = 1.0
     else:
@@ -281,6 +262,38 @@ def loop_systems(
     B_ff = np.concatenate([plant_ff * Bp, b_ff])
     B_int = np.concatenate([np.zeros(n), b_int])
     return LoopSystems(P, Ctrl, L, A_cl, B_ff, B_int, Kr, ref_advance, dt, A_in)
+
+
+def _state_feedback(
+    Ap: np.ndarray, Bp: np.ndarray, Kxs: np.ndarray, Kr: Any, dt: float | None, lti: bool
+) -> LoopSystems:
+    """The true-state-feedback comparison loop ``u = Kx[:2] x`` (scaled plant ``Ap, Bp``)."""
+    ts = dt if dt else 0
+    Kst = Kxs[:2]  # u = Kx[:2] x (+ a1/a3 x3: a disturbance feed-through)
+    Ctrl = Pst = L = None
+    if lti:
+        import control
+
+        Ctrl = control.ss([], [], [], Kst[None, :], ts)
+        Pst = control.ss(Ap, Bp[:, None], np.eye(2), 0.0, ts)
+        L = control.ss(Ap, Bp[:, None], -Kst[None, :], 0.0, ts)
+    A_cl = Ap + np.outer(Bp, Kst)
+    return LoopSystems(Pst, Ctrl, L, A_cl, Bp.copy(), np.zeros(2), Kr, False, dt, np.outer(Bp, Kst))
+
+
+def _continuous_controller(
+    params: BoucWenParams, l: np.ndarray, s3: np.ndarray, Kxs: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """``(Ac, Bc, Cc, Dc, b_ff, b_int)`` of the continuous observer and eq. (12), scaled by ``s3``.
+
+    ``xhat' = (A0 - l C) xhat + B0 u + l y``, ``u = Kx xhat``.
+    """
+    A0 = np.array([[0.0, 1.0, 0.0], [-params.a1, -params.a2, -params.a1], [0.0, 0.0, 0.0]])
+    B0 = s3 * np.array([0.0, params.a3, 0.0])
+    A0 = s3[:, None] * A0 / s3[None, :]
+    ls = s3 * l
+    Ac = A0 - np.outer(ls, _C3) + np.outer(B0, Kxs)
+    return Ac, ls[:, None], Kxs[None, :], np.zeros((1, 1)), B0, np.zeros(3)
 
 
 def closed_loop_matrix(params: BoucWenParams, lambda1: float, lambda2: float, gains: Any, **kw):
