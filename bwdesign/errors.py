@@ -1,8 +1,11 @@
-"""Typed exceptions raised by bwdesign.
+"""Typed exceptions (and the one warning category) raised by bwdesign.
 
 Every exception subclasses a built-in (mostly :class:`ValueError`) so callers
 can catch either the specific class or the built-in. Messages name the object,
-what was expected and what was found.
+what was expected and what was found. Every exception class of the package is
+defined here; a module that raises one of its own kind (``SweepError`` in
+:mod:`bwdesign.sim.sweep`, ``UsageError`` in :mod:`bwdesign.cli.args`,
+``TuningWarning`` in :mod:`bwdesign.control.controllers`) re-exports it from here.
 """
 
 from __future__ import annotations
@@ -18,6 +21,10 @@ __all__ = [
     "MissingExtraError",
     "NotCertifiedError",
     "OutputError",
+    "SweepError",
+    "UsageError",
+    "InternalError",
+    "TuningWarning",
 ]
 
 
@@ -98,3 +105,23 @@ class OutputError(BWDesignError, ValueError):
     target is refused, or at write time when the operating system refuses
     (disk full, permission); in both cases no user file was changed.
     """
+
+
+class SweepError(BWDesignError, RuntimeError):
+    """A sweep could not be completed (a chunk failed after its retries, no scheduler)."""
+
+
+class UsageError(BWDesignError, ValueError):
+    """Bad command-line input."""
+
+
+class InternalError(RuntimeError):
+    """bwdesign contradicts itself (a bug), e.g. a C template asks for a value nobody gives.
+
+    Deliberately not a :class:`BWDesignError`: it is no user's mistake, so the
+    command line shows its traceback instead of reporting bad input.
+    """
+
+
+class TuningWarning(UserWarning):
+    """A tuning outside the paper's proof (e.g. ``lambda2 <= 3/2``) but not invalid."""

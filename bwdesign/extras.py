@@ -12,7 +12,7 @@ from __future__ import annotations
 from importlib import import_module
 from types import ModuleType
 
-from .errors import MissingExtraError
+from .errors import InputError, MissingExtraError
 
 __all__ = ["EXTRAS", "require"]
 
@@ -56,7 +56,7 @@ def require(module: str, *, extra: str, feature: str) -> ModuleType:
 'bwdesign_no_such_module', which is not installed: pip install 'bwdesign[sweep]'
     """
     if extra not in EXTRAS:
-        raise ValueError(f"unknown extra {extra!r}; extras are {', '.join(sorted(EXTRAS))}")
+        raise InputError(f"unknown extra {extra!r}; extras are {', '.join(sorted(EXTRAS))}")
     try:
         return import_module(module)
     except ModuleNotFoundError as err:

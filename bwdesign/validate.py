@@ -36,11 +36,15 @@ __all__ = [
     "below_nyquist",
     "DT",
     "UDOT_MAX",
+    "UDOT_BOUND",
     "DECAY",
     "POLE_RADIUS",
+    "LAMBDA",
     "GAIN",
     "SEED",
     "SIGNAL",
+    "POSITIVE",
+    "NONNEGATIVE",
 ]
 
 
@@ -219,8 +223,12 @@ def below_nyquist(
 DT = Range(1e-9, 1.0, unit="s")
 #: Input-rate envelope |u'| (V/s).
 UDOT_MAX = Range(0.0, 1e9, lo_open=True, unit="V/s")
+#: An input-rate bound where 0 is meaningful (an analysis with the input at rest) (V/s).
+UDOT_BOUND = Range(0.0, 1e9, unit="V/s")
 #: Required decay rate of the estimation error (1/s).
 DECAY = Range(0.0, 1e9, unit="1/s")
+#: The eq. (12) constants lambda1, lambda2 and the integral rate of the controller (1/s).
+LAMBDA = Range(0.0, 1e12, lo_open=True, unit="1/s")
 #: Pole radius of the gain synthesis (rad/s).
 POLE_RADIUS = Range(0.0, 1e12, lo_open=True, unit="rad/s")
 #: Each continuous observer gain l1, l2, l3 (1/s, 1/s^2, 1/s).
@@ -229,3 +237,7 @@ GAIN = Range(-1e15, 1e15)
 SEED = Range(0, math.inf)
 #: Signal levels: reference amplitude and offset, input limits (plant units, V).
 SIGNAL = Range(-1e9, 1e9)
+#: Any finite number > 0, for quantities with no narrower supported range.
+POSITIVE = Range(0.0, math.inf, lo_open=True)
+#: Any finite number >= 0 (counts, noise levels), for quantities with no narrower range.
+NONNEGATIVE = Range(0.0, math.inf)

@@ -13,6 +13,7 @@ and the directory holds exactly what it held before.
 
 from __future__ import annotations
 
+import math
 import os
 import stat
 import warnings
@@ -25,22 +26,30 @@ import pytest
 from bwdesign import (
     BoucWenParams,
     ClosedLoop,
+    HysteresisObserver,
     ObserverSpec,
     Sine,
     Start,
     UncertaintyBox,
+    UnscentedObserver,
     certify,
     make_controller,
     preset,
     simulate,
     synthesize,
 )
+from bwdesign.certify.disturbance import certify_disturbance
+from bwdesign.certify.robust_observer import certify_robust_observer
 from bwdesign.cli.main import main
 from bwdesign.control.controllers import TrackingController
+from bwdesign.control.tuning import MarginRequirements, digital_tuning
 from bwdesign.errors import ConfigError, GainError, InputError, ParameterError
-from bwdesign.identify import IdentificationData, load_data
+from bwdesign.extras import require
+from bwdesign.identify import IdentificationData, identify, load_data
 from bwdesign.identify.excite import design_excitation
 from bwdesign.model.config import load_config
+from bwdesign.model.plant import simulate_zoh
+from bwdesign.model.requirements import parse_requirements
 from bwdesign.sim import simulate_batch
 from bwdesign.validate import DT, SEED, integer, parse_real, real
 
@@ -377,6 +386,12 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         "once",
     ),
     (
+        "report [sweep] samples 0",
+        REPORT,
+        _stage(SWEPT.replace("samples = 4", "samples = 0")),
+        "[sweep] samples = 0 is outside the supported range [1, inf)",
+    ),
+    (
         "report [sweep] samples 1e8",
         REPORT,
         _stage(SWEPT.replace("samples = 4", "samples = 100000000")),
@@ -605,6 +620,141 @@ PYTHON = [
         InputError,
         "below the smallest usable",
     ),
+]
+
+
+#: Issue 25: every number through bwdesign.validate, its range stated in the message.
+RECORD = IdentificationData.from_arrays(
+    np.arange(400) * 1e-3, 5 + 4 * np.sin(0.05 * np.arange(400.0)), np.cos(np.arange(400.0))
+)
+BOX = UncertaintyBox.from_dict({"a1": {"rel": 0.02}})
+PYTHON += [
+    (
+        "UKF udot_max 1e300",
+        lambda: UnscentedObserver(P, 2e-4, udot_max=1e300),
+        InputError,
+        r"udot_max \(V/s\) = 1e\+300 is outside the supported range \(0, 1e\+09\] V/s",
+    ),
+    (
+        "observer dt 0",
+        lambda: HysteresisObserver(P, (8, 64, -512), dt=0.0),
+        InputError,
+        r"dt \(s\) = 0 is outside",
+    ),
+    (
+        "controller lambda1 1e300",
+        lambda: TrackingController(P, 1e300, 2.0),
+        GainError,
+        r"lambda1 \(1/s\) = 1e\+300 is outside the supported range \(0, 1e\+12\] 1/s",
+    ),
+    (
+        "excite duration -1",
+        lambda: design_excitation(P, umin=0.0, umax=120.0, udot_max=1e3, duration=-1.0, dt=1e-3),
+        InputError,
+        r"duration \(s\) = -1 is outside the supported range \(0, inf\)",
+    ),
+    (
+        "excite umin str",
+        lambda: design_excitation(P, umin="0", umax=120.0, udot_max=1e3, duration=1.0, dt=1e-3),
+        InputError,
+        r"umin \(V\) must be a number, got str",
+    ),
+    (
+        "identify multistart 0",
+        lambda: identify(RECORD, multistart=0),
+        InputError,
+        "multistart = 0 is outside",
+    ),
+    (
+        "identify multistart 2.0",
+        lambda: identify(RECORD, multistart=2.0),
+        InputError,
+        "multistart must be an integer",
+    ),
+    (
+        "digital_tuning mismatch 0.7",
+        lambda: digital_tuning(P, 2e-4, mismatch=0.7),
+        InputError,
+        r"mismatch \(relative error\) = 0.7 is outside the supported range \[0, 0.5\)",
+    ),
+    (
+        "digital_tuning margins.phase_deg nan",
+        lambda: digital_tuning(P, 2e-4, margins=MarginRequirements(phase_deg=math.nan)),
+        InputError,
+        "margins.phase_deg deg must be finite",
+    ),
+    (
+        "digital_tuning observer_radius str",
+        lambda: digital_tuning(P, 2e-4, observer_radius="fast"),
+        InputError,
+        "observer_radius must be a number",
+    ),
+    (
+        "simulate_zoh u_prev str",
+        lambda: simulate_zoh(P, np.zeros(3), 2e-4, np.zeros(3), u_prev="0"),
+        InputError,
+        "u_prev must be a number, got str",
+    ),
+    (
+        "certify_disturbance udot_max -1",
+        lambda: certify_disturbance(P, (8, 64, -512, 100), udot_max=-1.0),
+        InputError,
+        r"udot_max \(V/s\) = -1 is outside the supported range \[0, 1e\+09\] V/s",
+    ),
+    (
+        "robust observer noise_max nan",
+        lambda: certify_robust_observer(
+            P,
+            (8, 64, -512),
+            dt=2e-4,
+            uncertainty=BOX,
+            udot_max=361,
+            input_range=(0, 120),
+            noise_max=math.nan,
+        ),
+        InputError,
+        "noise_max must be finite, got nan",
+    ),  # fmt: skip
+    (
+        "robust observer interior_samples -1",
+        lambda: certify_robust_observer(
+            P,
+            (8, 64, -512),
+            dt=2e-4,
+            uncertainty=BOX,
+            udot_max=361,
+            input_range=(0, 120),
+            interior_samples=-1,
+        ),
+        InputError,
+        "interior_samples = -1 is outside",
+    ),  # fmt: skip
+    (
+        "robust observer input_range str",
+        lambda: certify_robust_observer(
+            P,
+            (8, 64, -512),
+            dt=2e-4,
+            uncertainty=BOX,
+            udot_max=361,
+            input_range=("0", 120),
+        ),
+        InputError,
+        r"input_range u_lo \(V\) must be a number",
+    ),  # fmt: skip
+    (
+        "Sine frequency 0",
+        lambda: Sine(amplitude=1.0, frequency=0.0),
+        ConfigError,
+        "frequency = 0 is outside",
+    ),
+    (
+        "requirements max_me_um -1",
+        lambda: parse_requirements({"max_me_um": -1.0}),
+        ConfigError,
+        r"\[requirements\] max_me_um = -1 is outside the supported range \[0, inf\)",
+    ),
+    ("unknown extra", lambda: require("x", extra="nope", feature="f"), InputError, "unknown extra"),
 ]
 
 

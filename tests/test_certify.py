@@ -28,6 +28,7 @@ from bwdesign.certify import lmi as lmi_mod
 from bwdesign.certify import verified as verified_mod
 from bwdesign.certify.checks import continuous_equivalent, rho_interval, sector_interval
 from bwdesign.certify.linear import lipschitz_envelope
+from bwdesign.certify.lmi import core as lmi_core  # where solve() reads the solver settings
 from bwdesign.certify.results import TIERS
 from bwdesign.cli.main import main
 from bwdesign.model.plant import discretize, phi
@@ -280,16 +281,16 @@ def test_unbounded_model_needs_permission():
 
 
 def test_solver_failure_is_reported(experiment, monkeypatch):
-    monkeypatch.setattr(lmi_mod, "SOLVERS", ("NO_SUCH_SOLVER",))
-    monkeypatch.setattr(lmi_mod, "_OPTIONS", {"NO_SUCH_SOLVER": {}})
+    monkeypatch.setattr(lmi_core, "SOLVERS", ("NO_SUCH_SOLVER",))
+    monkeypatch.setattr(lmi_core, "_OPTIONS", {"NO_SUCH_SOLVER": {}})
     # without a solver the Riccati (KYP) matrices still certify, checked outside
     rep = certify(experiment, PAPER_GAINS, udot_max=EXPERIMENT_ENVELOPE, dt=DT)
     for name in ("sector", "sampled"):
         assert rep.tier(name).holds and "KYP" in rep.tier(name).status
     assert_certificate_valid(rep)
     # and with those off too, a solver failure is a status, never a "holds"
-    monkeypatch.setattr(verified_mod, "_kyp_candidates", lambda *a: [])
-    monkeypatch.setattr(verified_mod, "_dare_candidates", lambda *a: [])
+    monkeypatch.setattr(verified_mod, "kyp_candidates", lambda *a: [])
+    monkeypatch.setattr(verified_mod, "dare_candidates", lambda *a: [])
     rep = certify(experiment, PAPER_GAINS, udot_max=EXPERIMENT_ENVELOPE, dt=DT)
     for name in ("lipschitz", "sector", "sampled"):
         cert = rep.tier(name)
@@ -344,7 +345,7 @@ def test_a_ctrl_c_scs_catches_itself_cancels(monkeypatch):
         return out
 
     monkeypatch.setattr(scs, "solve", solve_then_interrupt)
-    monkeypatch.setattr(lmi_mod, "SOLVERS", ("SCS",))
+    monkeypatch.setattr(lmi_core, "SOLVERS", ("SCS",))
     n = 30  # SCS needs its 50 000 iterations (~20 s) here: the SIGINT lands mid-solve
     X = cp.Variable((n, n), symmetric=True)
     C = np.random.default_rng(0).standard_normal((n, n))
@@ -582,10 +583,10 @@ def test_cli_json_stays_clean_when_a_solver_fails(capfd):
     # The exact envelopes answer "no" without a solver, so force SCS to run (and fail)
     # on a request the exact criterion accepts.
     mp = pytest.MonkeyPatch()
-    mp.setattr(lmi_mod, "SOLVERS", ("SCS",))
-    mp.setattr(lmi_mod, "_OPTIONS", {"SCS": {"max_iters": 1}})
-    mp.setattr(lmi_mod, "_LOCAL", threading.local())
-    mp.setattr(verified_mod, "_kyp_candidates", lambda *a: [])  # no Riccati P: the LMI must run
+    mp.setattr(lmi_core, "SOLVERS", ("SCS",))
+    mp.setattr(lmi_core, "_OPTIONS", {"SCS": {"max_iters": 1}})
+    mp.setattr(lmi_core, "_LOCAL", threading.local())
+    mp.setattr(verified_mod, "kyp_candidates", lambda *a: [])  # no Riccati P: the LMI must run
     argv = ["certify", "--plant", "paper_experiment"]
     argv += ["--gains", "8,64,-512", "--udot-max", "361", "--json"]
     try:

@@ -64,8 +64,12 @@ BAD = [
     ("unknown section", GOOD_PLANT + "[plotting]\ncolor = 1\n", "unknown section(s) [plotting]"),
     ("mixed forms", GOOD_PLANT + "m = 1.0\n", "not both"),
     ("bad gains", GOOD_PLANT + "[observer]\ngains = [1, 2]\n", "list of 3 numbers"),
-    ("bad envelope", GOOD_PLANT + "[envelope]\nudot_max = -3\n", "positive number"),
-    ("bad dt", GOOD_PLANT + "[sampling]\ndt = 0\n", "dt must be a positive number"),
+    (
+        "bad envelope",
+        GOOD_PLANT + "[envelope]\nudot_max = -3\n",
+        "udot_max (input unit/s) = -3 is outside the supported range (0, 1e+09] V/s",
+    ),
+    ("bad dt", GOOD_PLANT + "[sampling]\ndt = 0\n", "[sampling] dt = 0 is outside"),
     (
         "envelope without reference",
         GOOD_PLANT + "[envelope]\nfrom_reference = true\n",

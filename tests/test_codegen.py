@@ -28,7 +28,7 @@ from bwdesign import (
 )
 from bwdesign.cli.main import main
 from bwdesign.codegen import c_literal, export_c
-from bwdesign.errors import NotCertifiedError
+from bwdesign.errors import InternalError, NotCertifiedError
 from bwdesign.model.references import Triangle
 from bwdesign.observers.gains import disturbance_gains_from
 
@@ -291,6 +291,14 @@ def test_runtime_guard_flags_uncertified_steps(tmp_path, config):
     header = (tmp_path / "bw.h").read_text()
     assert "CERTIFIED by the sampled tier" in header
     assert "#define BW_UDOT_MAX" in header and "#define BW_DT" in header
+
+
+def test_a_template_missing_a_value_is_an_internal_error():
+    """A template asking for a value the exporter does not give is a bug: loud, not bad input."""
+    from bwdesign.codegen.export import _fill
+
+    with pytest.raises(InternalError, match=r"template observer.h.tmpl: no value for \$"):
+        _fill("observer.h.tmpl")
 
 
 def test_literals_are_exact():

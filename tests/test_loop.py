@@ -17,7 +17,7 @@ from bwdesign import (
     simulate,
 )
 from bwdesign.control.analysis import stability_interval
-from bwdesign.control.tuning import digital_tuning, observer_gains
+from bwdesign.control.tuning import MarginRequirements, digital_tuning, observer_gains
 from bwdesign.errors import InputError
 from bwdesign.model.plant import discretize
 from bwdesign.observers.gains import discrete_gains, error_matrix
@@ -185,6 +185,23 @@ def test_digital_tuning(experiment):
     assert not digital_tuning(experiment, DT, gains=PAPER_GAINS, n_candidates=5).met
 
 
+def test_margin_requirements_are_one_object(experiment):
+    """The three required margins travel together; the default is 6 dB, 45 deg, one sample."""
+    assert MarginRequirements().as_dict(DT) == {
+        "min_gain_margin_db": 6.0,
+        "min_phase_margin": 45.0,
+        "min_delay_margin": DT,
+    }
+    loose = MarginRequirements(gain_db=3, phase_deg=30.0, delay_samples=0.5)
+    t = digital_tuning(experiment, DT, observer_radius=0.2, n_candidates=3, margins=loose)
+    assert t.requirements == loose.as_dict(DT) and t.requirements["min_gain_margin_db"] == 3.0
+    assert "min(GM/3 dB, PM/30 deg, DM/0.5 sample)" in t.reasoning
+    with pytest.raises(InputError, match=r"margins.gain_db dB = -1 is outside"):
+        MarginRequirements(gain_db=-1.0)
+    with pytest.raises(InputError, match="margins must be a MarginRequirements"):
+        digital_tuning(experiment, DT, margins={"gain_db": 6.0})
+
+
 def test_observer_gains_place_poles(usable_plant):
     poles = [-900.0, -1000.0 + 300j, -1000.0 - 300j]
     l = observer_gains(usable_plant, poles)
@@ -196,7 +213,7 @@ BAD = [
     ("delay without dt", dict(delay=True), "need a sample time"),
     ("unknown form", dict(form="zoh"), "form must be"),
     ("unknown estimator", dict(estimator="kalman"), "estimator must be"),
-    ("negative dt", dict(dt=-1.0), "dt must be"),
+    ("negative dt", dict(dt=-1.0), r"dt \(s\) = -1 is outside"),
     ("bad gains", dict(gains=(1.0, 2.0)), "three numbers"),
 ]
 

@@ -128,8 +128,8 @@ def test_unbounded_model_is_refused_unless_allowed():
     [
         (dict(u=np.zeros((2, 2))), "1-D"),
         (dict(u=np.array([0.0, np.nan])), "finite"),
-        (dict(dt=0.0), "dt must be"),
-        (dict(dt=-1e-3), "dt must be"),
+        (dict(dt=0.0), r"dt \(s\) = 0 is outside"),
+        (dict(dt=-1e-3), r"dt \(s\) = -0.001 is outside"),
         (dict(x0=np.zeros(2)), r"shape \(3,\)"),
         (dict(x0=np.array([0.0, np.inf, 0.0])), "finite"),
         (dict(u_prev=math.nan), "u_prev"),

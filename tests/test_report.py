@@ -168,7 +168,7 @@ BAD = [
     (
         "envelope not positive",
         GOOD.replace("from_reference = true\nmargin = 1.1", "udot_max = -5.0"),
-        "positive number",
+        "[envelope] udot_max (input unit/s) = -5 is outside the supported range",
     ),
     (
         "envelope not a number",

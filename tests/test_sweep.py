@@ -534,7 +534,10 @@ def test_report_includes_the_configs_sweep(tmp_path, capsys):
     "edit, message",
     [
         (("[uncertainty]", "[not_uncertainty]"), r"unknown section"),
-        (("samples = 100", "samples = 0"), r"\[sweep\] samples must be an integer > 0"),
+        (
+            ("samples = 100", "samples = 0"),
+            r"\[sweep\] samples = 0 is outside the supported range \[1, inf\)",
+        ),
         (("samples = 100", 'samples = 100\ntuning = "fast"'), r"\[sweep\] tuning must be one of"),
         (("samples = 100", 'samples = 100\nobservers = ["ukf"]'), r"\[sweep\] observers"),
         (("samples = 100", 'samples = 100\nobservers = ["eso", "eso"]'), r"given once"),

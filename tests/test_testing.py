@@ -91,7 +91,12 @@ def test_check_fails_when_a_gain_is_no_longer_certified(tmp_path, capsys):
             r"unknown key\(s\) max_me; allowed keys are certified, min_decay",
         ),
         ("wrong type", "certified = true", 'certified = "yes"', "certified must be true or false"),
-        ("negative limit", "max_me_um = 1.0", "max_me_um = -1.0", "finite number >= 0"),
+        (
+            "negative limit",
+            "max_me_um = 1.0",
+            "max_me_um = -1.0",
+            r"max_me_um = -1 is outside the supported range \[0, inf\)",
+        ),
         (
             "missing section",
             "[observer]\ngains = [2286.2, 1208283.0, -6256.75]\n",

@@ -98,7 +98,7 @@ BAD_LAMBDAS = [
         "lambda1 zero",
         dict(lambda1=0.0, lambda2=2.0),
         GainError,
-        "lambda1 must be a finite number > 0",
+        r"lambda1 \(1/s\) = 0 is outside the supported range \(0, 1e\+12\] 1/s",
     ),
     ("lambda1 negative", dict(lambda1=-1.0, lambda2=2.0), GainError, "lambda1"),
     ("lambda2 negative", dict(lambda1=1.0, lambda2=-2.0), GainError, "lambda2"),

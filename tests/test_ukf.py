@@ -103,9 +103,17 @@ def test_batch_filter_equals_loop_and_saver_records(experiment):
 
 BAD = [
     ("no-envelope", lambda p: UnscentedObserver(p, DT), "give udot_max"),
-    ("udot-zero", lambda p: UnscentedObserver(p, DT, udot_max=0.0), r"udot_max .* > 0"),
-    ("noise-negative", lambda p: UnscentedObserver(p, DT, udot_max=1.0, noise_std=-1.0), "> 0"),
-    ("dt-zero", lambda p: UnscentedObserver(p, 0.0, udot_max=1.0), "dt must be"),
+    (
+        "udot-zero",
+        lambda p: UnscentedObserver(p, DT, udot_max=0.0),
+        r"udot_max \(V/s\) = 0 is outside the supported range \(0, 1e\+09\]",
+    ),
+    (
+        "noise-negative",
+        lambda p: UnscentedObserver(p, DT, udot_max=1.0, noise_std=-1.0),
+        r"noise_std .* = -1 is outside .* \(0, inf\)",
+    ),
+    ("dt-zero", lambda p: UnscentedObserver(p, 0.0, udot_max=1.0), r"dt \(s\) = 0 is outside"),
     ("Q-shape", lambda p: UnscentedObserver(p, DT, Q=np.eye(2)), r"shape \(3, 3\)"),
     ("Q-asym", lambda p: UnscentedObserver(p, DT, Q=np.triu(np.ones((3, 3)))), "symmetric"),
     ("R-negative", lambda p: UnscentedObserver(p, DT, udot_max=1.0, R=-1.0), "semidefinite"),

@@ -12,9 +12,9 @@ from scipy.linalg import logm, matrix_balance
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize
-from ..observers.gains import _as_gains, delta_transition, discrete_gains
-from .results import _U, REL_MARGIN, Margin, _frozen
+from ..model.plant import check_dt, discretize
+from ..observers.gains import as_gains, delta_transition, discrete_gains
+from .results import REL_MARGIN, UNIT_ROUNDOFF, Margin, frozen_array
 
 __all__ = ["continuous_equivalent", "sector_interval", "rho_interval"]
 
@@ -22,18 +22,8 @@ __all__ = ["continuous_equivalent", "sector_interval", "rho_interval"]
 # -- model pieces ---------------------------------------------------------------
 
 
-def _rate(value: float, name: str, *, positive: bool) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-        raise InputError(f"{name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or (value <= 0 if positive else value < 0):
-        raise InputError(
-            f"{name} must be a finite number {'> 0' if positive else '>= 0'}, got {value}"
-        )
-    return value
-
-
-def _model_matrix(params: BoucWenParams) -> np.ndarray:
+def model_matrix(params: BoucWenParams) -> np.ndarray:
+    """The observer's model matrix ``A0`` (state ``(x1, x2, x3)``)."""
     return np.array([[0.0, 1.0, 0.0], [-params.a1, -params.a2, -params.a1], [0.0, 0.0, 0.0]])
 
 
@@ -67,7 +57,8 @@ def rho_interval(params: BoucWenParams, udot_max: float, dt: float) -> tuple[flo
     return lo, hi
 
 
-def _lipschitz_coefficient(params: BoucWenParams) -> float:
+def lipschitz_coefficient(params: BoucWenParams) -> float:
+    """``|beta| + |gamma|``: ``|phi~| <= (|beta| + |gamma|) |u'| |eps3|``."""
     return abs(params.beta) + abs(params.gamma)
 
 
@@ -83,13 +74,13 @@ def _balance(M: np.ndarray) -> np.ndarray:
     return d / d[2]
 
 
-def _similar(M: np.ndarray, s: np.ndarray) -> np.ndarray:
+def similar(M: np.ndarray, s: np.ndarray) -> np.ndarray:
     """``S^-1 M S`` for ``S = diag(s)``."""
     return M * s[None, :] / s[:, None]
 
 
 @dataclass(frozen=True)
-class _Scaled:
+class Scaled:
     """A continuous error matrix with its scaling ``A = w S Ahat S^-1``."""
 
     A: np.ndarray
@@ -103,12 +94,13 @@ class _Scaled:
         return float(np.max(np.linalg.eigvals(Ak).real)) * self.w
 
 
-def _scale_continuous(params: BoucWenParams, A: np.ndarray) -> _Scaled:
+def scale_continuous(params: BoucWenParams, A: np.ndarray) -> Scaled:
+    """``A`` in the time scale ``sqrt(a1)`` and a balancing diagonal scaling."""
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])
-    AT = _similar(A, T) / w
+    AT = similar(A, T) / w
     d = _balance(AT)
-    return _Scaled(A=A, Ahat=_similar(AT, d), s=T * d, w=w)
+    return Scaled(A=A, Ahat=similar(AT, d), s=T * d, w=w)
 
 
 # -- discrete gains -------------------------------------------------------------
@@ -130,13 +122,13 @@ def continuous_equivalent(
     tuple of 3 floats or None
         ``(l1, l2, l3)``, or ``None`` when no exact equivalent exists.
     """
-    dt = _check_dt(dt)
-    K = np.asarray(_as_gains(K, "discrete gains K"))
+    dt = check_dt(dt)
+    K = np.asarray(as_gains(K, "discrete gains K"))
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])
     F = discretize(params, dt).F
     Ad = F - np.outer(K, F[0])
-    Ads = _similar(Ad, T)
+    Ads = similar(Ad, T)
     z = np.linalg.eigvals(Ads)
     if np.any((np.abs(z.imag) <= 1e-12 * np.abs(z).max()) & (z.real <= 0)) or np.any(z == 0):
         return None
@@ -165,7 +157,7 @@ def continuous_equivalent(
 # -- the outside check ------------------------------------------------------------
 
 
-def _negdef(name: str, M: np.ndarray, err: np.ndarray | None = None) -> Margin:
+def negdef(name: str, M: np.ndarray, err: np.ndarray | None = None) -> Margin:
     """Margin for ``M < 0``: equilibrate by the diagonal, add a round-off bound."""
     M = (M + M.T) / 2
     dg = np.abs(np.diag(M))
@@ -177,19 +169,21 @@ def _negdef(name: str, M: np.ndarray, err: np.ndarray | None = None) -> Margin:
         return Margin(name, math.inf, 0.0)
     lam = float(np.linalg.eigvalsh(Mh).max())
     norm = float(np.linalg.norm(Mh, 2))
-    rounding = 8 * Mh.shape[0] * _U * norm
+    rounding = 8 * Mh.shape[0] * UNIT_ROUNDOFF * norm
     if err is not None:
         rounding += float(np.linalg.norm(err * Dm, "fro"))
     return Margin(name, lam + rounding, -REL_MARGIN * norm)
 
 
-def _posdef(name: str, P: np.ndarray) -> Margin:
+def posdef(name: str, P: np.ndarray) -> Margin:
     """Margin for ``P > 0`` (the check of ``-P < 0``)."""
-    return _negdef(name, -P)
+    return negdef(name, -P)
 
 
 @dataclass(frozen=True)
-class _Check:
+class Check:
+    """Outcome of one LMI tier check: the verdict, the checked ``P`` and its margins."""
+
     ok: bool
     P: np.ndarray | None
     margins: tuple[Margin, ...]
@@ -198,17 +192,17 @@ class _Check:
     t: float | None = None
 
 
-def _from_solution(sol: Any, what: str) -> _Check | None:
-    """A failed _Check for a solver failure or a non-positive margin, else None."""
+def _from_solution(sol: Any, what: str) -> Check | None:
+    """A failed Check for a solver failure or a non-positive margin, else None."""
     if not sol.ok:
         tried = "; ".join(sol.attempts) or "no solver ran"
         label = "unverified" if sol.status == "optimal_inaccurate" else "solver failed"
-        return _Check(
+        return Check(
             False, None, (), sol.solver, f"{label}: {what} LMI status {sol.status} ({tried})"
         )
     t = float(sol["t"])
     if not t > 0:
-        return _Check(
+        return Check(
             False,
             None,
             (),
@@ -220,10 +214,10 @@ def _from_solution(sol: Any, what: str) -> _Check | None:
     return None
 
 
-def _verdict(margins: tuple[Margin, ...], P: np.ndarray, solver: str, t: float) -> _Check:
+def _verdict(margins: tuple[Margin, ...], P: np.ndarray, solver: str, t: float) -> Check:
     failed = [m.name for m in margins if not m.passed]
     if failed:
-        return _Check(
+        return Check(
             False,
             None,
             margins,
@@ -231,15 +225,17 @@ def _verdict(margins: tuple[Margin, ...], P: np.ndarray, solver: str, t: float) 
             "not certified: the solver's P failed the outside check (" + "; ".join(failed) + ")",
             t,
         )
-    return _Check(True, _frozen(P), margins, solver, "certified", t)
+    return Check(True, frozen_array(P), margins, solver, "certified", t)
 
 
-def _cont_err(A: np.ndarray, P: np.ndarray, mu: float) -> np.ndarray:
+def continuous_error(A: np.ndarray, P: np.ndarray, mu: float) -> np.ndarray:
+    """Entrywise round-off bound of ``A'P + PA + 2 mu P`` formed in floating point."""
     aA, aP = np.abs(A), np.abs(P)
-    return 16 * _U * (aA.T @ aP + aP @ aA + 2 * mu * aP)
+    return 16 * UNIT_ROUNDOFF * (aA.T @ aP + aP @ aA + 2 * mu * aP)
 
 
-def _check_lipschitz(sc: _Scaled, L: float, mu: float) -> _Check:
+def check_lipschitz(sc: Scaled, L: float, mu: float) -> Check:
+    """The lipschitz LMI solved in scaled coordinates, then checked outside the solver."""
     from . import lmi
 
     sol = lmi.lipschitz_margin(sc.Ahat, L=L / sc.w, mu=mu / sc.w)
@@ -249,12 +245,12 @@ def _check_lipschitz(sc: _Scaled, L: float, mu: float) -> _Check:
     Ph = np.asarray(sol["P"])
     Ph = (Ph + Ph.T) / 2
     P = sc.w * Ph / np.outer(sc.s, sc.s)  # S^-T Phat S^-1, times w (s3 = 1)
-    return _verify_lipschitz(sc, L, mu, P, sol.solver, float(sol["t"]))
+    return verify_lipschitz(sc, L, mu, P, sol.solver, float(sol["t"]))
 
 
-def _verify_lipschitz(
-    sc: _Scaled, L: float, mu: float, P: np.ndarray, solver: str, t: float | None
-) -> _Check:
+def verify_lipschitz(
+    sc: Scaled, L: float, mu: float, P: np.ndarray, solver: str, t: float | None
+) -> Check:
     """Outside check of the lipschitz LMI for a given ``P`` (original coordinates)."""
     A = sc.A
     top = A.T @ P + P @ A + 2 * mu * P
@@ -264,11 +260,11 @@ def _verify_lipschitz(
     M[:3, 3] = M[3, :3] = P[:, 2]
     M[3, 3] = -1.0
     err = np.zeros((4, 4))
-    err[:3, :3] = _cont_err(A, P, mu)
-    err[2, 2] += 4 * _U * L * L
+    err[:3, :3] = continuous_error(A, P, mu)
+    err[2, 2] += 4 * UNIT_ROUNDOFF * L * L
     margins = (
-        _posdef("P > 0", P),
-        _negdef("[[A'P + PA + 2 mu P + L^2 e3 e3', P e3], [e3'P, -1]] < 0", M, err),
+        posdef("P > 0", P),
+        negdef("[[A'P + PA + 2 mu P + L^2 e3 e3', P e3], [e3'P, -1]] < 0", M, err),
     )
     return _verdict(margins, P, solver, t)
 
@@ -277,7 +273,7 @@ def _verify_lipschitz(
 KYP_EPS = (1e-2, 1e-4, 1e-6, 1e-9)
 #: The same for the discrete Riccati equation of the sampled tier.
 DARE_EPS = (1e-4, 1e-7, 1e-10)
-#: Weights ``eta`` of the modal state weight ``eta gap^2 H`` (see :func:`_kyp_candidates`).
+#: Weights ``eta`` of the modal state weight ``eta gap^2 H`` (see :func:`kyp_candidates`).
 KYP_MODAL = (1.0, 0.1, 1e-2, 1e-3, 1e-4, 1e-6)
 #: Decay shifts of the last Riccati candidates, as fractions of ``gap``.
 KYP_SHIFTS = (1e-2, 1e-4)
@@ -312,7 +308,7 @@ def modal_metric(A: np.ndarray) -> np.ndarray | None:
     return (H + H.T) / (2 * np.linalg.norm(H, 2))
 
 
-def _kyp_candidates(sc: _Scaled, k1: float, k2: float, mu: float) -> Iterator[np.ndarray]:
+def kyp_candidates(sc: Scaled, k1: float, k2: float, mu: float) -> Iterator[np.ndarray]:
     """Lyapunov matrices from the KYP Riccati equation of the sector ``[k1, k2]`` (1/s).
 
     The S-procedure inequality with multiplier 1,
@@ -378,7 +374,7 @@ def _care(A: np.ndarray, B: np.ndarray, Q: np.ndarray, sh: float) -> np.ndarray 
     return (X + X.T) / 2
 
 
-def _lipschitz_candidates(P: np.ndarray, L: float) -> list[np.ndarray]:
+def lipschitz_candidates(P: np.ndarray, L: float) -> list[np.ndarray]:
     """Rescalings ``P / tau`` of a Theorem-1 matrix to try in the lipschitz LMI.
 
     If ``A'P + PA <= -q I`` and ``2 L ||P|| + 2 mu ||P|| < q``, the S-procedure
@@ -391,7 +387,8 @@ def _lipschitz_candidates(P: np.ndarray, L: float) -> list[np.ndarray]:
     return [P / (tau * f) for f in (1.0, 2.0, 0.5, 4.0, 0.25)]
 
 
-def _check_sector(sc: _Scaled, k_lo: float, k_hi: float, mu: float) -> _Check:
+def check_sector(sc: Scaled, k_lo: float, k_hi: float, mu: float) -> Check:
+    """The sector LMI solved in scaled coordinates, then checked outside the solver."""
     from . import lmi
 
     sol = lmi.sector_margin(sc.Ahat, k_lo=k_lo / sc.w, k_hi=k_hi / sc.w, mu=mu / sc.w)
@@ -401,26 +398,30 @@ def _check_sector(sc: _Scaled, k_lo: float, k_hi: float, mu: float) -> _Check:
     Ph = np.asarray(sol["P"])
     Ph = (Ph + Ph.T) / 2
     P = Ph / np.outer(sc.s, sc.s)
-    return _verify_sector(sc, k_lo, k_hi, mu, P, sol.solver, float(sol["t"]))
+    return verify_sector(sc, k_lo, k_hi, mu, P, sol.solver, float(sol["t"]))
 
 
-def _verify_sector(
-    sc: _Scaled, k_lo: float, k_hi: float, mu: float, P: np.ndarray, solver: str, t: float | None
-) -> _Check:
+def verify_sector(
+    sc: Scaled, k_lo: float, k_hi: float, mu: float, P: np.ndarray, solver: str, t: float | None
+) -> Check:
     """Outside check of the sector LMI at both ends for a given ``P``."""
-    margins = [_posdef("P > 0", P)]
+    margins = [posdef("P > 0", P)]
     for k in (k_lo, k_hi):
         Ak = sc.A.copy()
         Ak[2, 2] -= k
         M = Ak.T @ P + P @ Ak + 2 * mu * P
         margins.append(
-            _negdef(f"He(P (A - k e3 e3' + mu I)) < 0 at k = {k:.6g} 1/s", M, _cont_err(Ak, P, mu))
+            negdef(
+                f"He(P (A - k e3 e3' + mu I)) < 0 at k = {k:.6g} 1/s",
+                M,
+                continuous_error(Ak, P, mu),
+            )
         )
     return _verdict(tuple(margins), P, solver, t)
 
 
 @dataclass(frozen=True)
-class _Sampled:
+class Sampled:
     """The sampled error dynamics ``(I - K C) F diag(1, 1, rho)`` in delta form.
 
     ``A_delta(rho) = Ad1 + ((rho - 1)/dt) b e3'`` with ``Ad1 = ((I - K C) F - I)/dt``
@@ -448,7 +449,7 @@ class _Sampled:
         ``(x1, x2/w0, x3)``, where its error is a small multiple of the unit round-off
         times the norm there (grown by ``1 + ||.|| dt`` for the squarings); ``F[0]`` is
         ``e1 + dt (F - I)[0]/dt``; ``Ad1 = (F - I)/dt - (K/dt) F[0]`` and the ``rho``
-        column are rounded once more each. :func:`_verify_sampled` adds the effect on
+        column are rounded once more each. :func:`verify_sampled` adds the effect on
         its blocks, so a ``P`` that passes is a certificate for the exact exponential.
         """
         dt = self.dt
@@ -463,13 +464,14 @@ class _Sampled:
         g = abs(math.expm1(x)) / dt if math.isfinite(x) else 1.0 / dt
         col = np.zeros((3, 3))
         col[:, 2] = g * (np.abs(self.b) + dt * E_Ad1[:, 2])
-        return 64 * _U * (E_Ad1 + col)
+        return 64 * UNIT_ROUNDOFF * (E_Ad1 + col)
 
 
 _E3 = np.array([0.0, 0.0, 1.0])
 
 
-def _prepare_sampled(params: BoucWenParams, K: np.ndarray, dt: float) -> _Sampled:
+def prepare_sampled(params: BoucWenParams, K: np.ndarray, dt: float) -> Sampled:
+    """The sampled error dynamics of the discrete gain ``K`` (:class:`Sampled`)."""
     F, Fd = delta_transition(params, dt)
     K = np.asarray(K, dtype=float)
     Ad = F - np.outer(K, F[0])
@@ -477,11 +479,11 @@ def _prepare_sampled(params: BoucWenParams, K: np.ndarray, dt: float) -> _Sample
     b = _E3 + dt * Ad1[:, 2]
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])
-    d = _balance(_similar(Ad1, T) / w)
-    return _Sampled(F=F, K=K, IKC_F=Ad, Ad1=Ad1, b=b, s=T * d, w=w, dt=dt)
+    d = _balance(similar(Ad1, T) / w)
+    return Sampled(F=F, K=K, IKC_F=Ad, Ad1=Ad1, b=b, s=T * d, w=w, dt=dt)
 
 
-def _check_sampled(sp: _Sampled, x_lo: float, x_hi: float, mu: float) -> _Check:
+def check_sampled(sp: Sampled, x_lo: float, x_hi: float, mu: float) -> Check:
     """The sampled LMI ``A_d' P A_d < r^2 P`` at both rho ends, solved and checked in delta form.
 
     Divided by ``dt`` it reads ``He(P A_delta) + dt A_delta' P A_delta + c P < 0``
@@ -491,14 +493,14 @@ def _check_sampled(sp: _Sampled, x_lo: float, x_hi: float, mu: float) -> _Check:
     from . import lmi
 
     if not x_hi < 700.0:
-        return _Check(
+        return Check(
             False, None, (), "", "not certified: the rho interval is unbounded at this rate"
         )
     dt, w = sp.dt, sp.w
     c = -math.expm1(-2.0 * mu * dt) / dt
     verts = [sp.delta(x) for x in (x_lo, x_hi)]
     sol = lmi.sampled_delta_margin(
-        _similar(verts[0], sp.s) / w, _similar(verts[1], sp.s) / w, h=w * dt, c=c / w
+        similar(verts[0], sp.s) / w, similar(verts[1], sp.s) / w, h=w * dt, c=c / w
     )
     bad = _from_solution(sol, "sampled")
     if bad is not None:
@@ -506,33 +508,33 @@ def _check_sampled(sp: _Sampled, x_lo: float, x_hi: float, mu: float) -> _Check:
     Ph = np.asarray(sol["P"])
     Ph = (Ph + Ph.T) / 2
     P = Ph / np.outer(sp.s, sp.s)
-    return _verify_sampled(sp, x_lo, x_hi, mu, P, sol.solver, float(sol["t"]))
+    return verify_sampled(sp, x_lo, x_hi, mu, P, sol.solver, float(sol["t"]))
 
 
-def _verify_sampled(
-    sp: _Sampled,
+def verify_sampled(
+    sp: Sampled,
     x_lo: float,
     x_hi: float,
     mu: float,
     P: np.ndarray,
     solver: str,
     t: float | None,
-) -> _Check:
+) -> Check:
     """Outside check of the delta-form sampled LMI at both rho ends for a given ``P``."""
     dt = sp.dt
     c = -math.expm1(-2.0 * mu * dt) / dt
-    margins = [_posdef("P > 0", P)]
+    margins = [posdef("P > 0", P)]
     aP = np.abs(P)
     for x in (x_lo, x_hi):
         D = sp.delta(x)
         M = D.T @ P + P @ D + dt * (D.T @ P @ D) + c * P
         aD = np.abs(D)
-        err = 32 * _U * (aD.T @ aP + aP @ aD + dt * (aD.T @ aP @ aD) + c * aP)
+        err = 32 * UNIT_ROUNDOFF * (aD.T @ aP + aP @ aD + dt * (aD.T @ aP @ aD) + c * aP)
         E = sp.delta_error(x)  # the exact D is within E of this one, entrywise
         EP = E.T @ aP
         err += EP + EP.T + dt * (EP @ (aD + E) + (aD + E).T @ EP.T)
         margins.append(
-            _negdef(
+            negdef(
                 f"(A_d' P A_d - r^2 P)/dt < 0 at rho = {math.exp(x):.6g} (delta form)",
                 M,
                 err,
@@ -541,7 +543,7 @@ def _verify_sampled(
     return _verdict(tuple(margins), P, solver, t)
 
 
-def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> Iterator[np.ndarray]:
+def dare_candidates(sp: Sampled, k1: float, k2: float, mu: float) -> Iterator[np.ndarray]:
     """Lyapunov matrices of the sampled tier from the discrete KYP Riccati equation.
 
     ``k = (1 - rho)/dt`` in ``[k1, k2]`` (1/s); with ``A = A_d(1)/r``,
@@ -550,7 +552,7 @@ def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> Iterator[
     (``s = (kappa1 + kappa2)/2``) holds for the stabilising solution of
     :func:`~scipy.linalg.solve_discrete_are` with ``R = -1``, ``S = -s e3`` and
     ``Q = -kappa1 kappa2 e3 e3' + W``, when the discrete circle criterion holds. As in
-    :func:`_kyp_candidates`: ``W = eps I``, then ``W = eta gap^2 H`` with the modal
+    :func:`kyp_candidates`: ``W = eps I``, then ``W = eta gap^2 H`` with the modal
     metric ``H`` of ``A`` and ``gap = 1 - max |eig(A)|``, then ``W = 0`` with ``r``
     replaced by ``exp(-(mu + delta) dt)`` (slack ``(r^2 - r_delta^2) P``). Lazy.
     """
@@ -559,7 +561,7 @@ def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> Iterator[
     if not (math.isfinite(c1) and math.isfinite(c2)):
         return
     sh = (c1 + c2) / 2
-    As = _similar(sp.IKC_F, sp.s)
+    As = similar(sp.IKC_F, sp.s)
     back = np.outer(sp.s, sp.s)
     Q0 = np.zeros((3, 3))
     Q0[2, 2] = -c1 * c2
@@ -568,7 +570,7 @@ def _dare_candidates(sp: _Sampled, k1: float, k2: float, mu: float) -> Iterator[
         X = _dare(Ah, Q0 + eps * np.eye(3), sh)
         if X is not None:
             yield X / back
-    lam = np.linalg.eigvals(_similar(sp.Ad1, sp.s))  # delta-form poles (z - 1)/dt
+    lam = np.linalg.eigvals(similar(sp.Ad1, sp.s))  # delta-form poles (z - 1)/dt
     m2 = float(np.max(dt * (2.0 * lam.real + dt * np.abs(lam) ** 2)))  # max |z|^2 - 1
     if m2 > -0.5:  # poles near z = 1: their decay from the delta form, without cancellation
         nominal = -0.5 * math.log1p(m2) / dt

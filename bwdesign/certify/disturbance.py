@@ -55,14 +55,15 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize
+from ..model.plant import check_dt, discretize
 from ..observers.gains import (
     check_disturbance_discrete,
     check_disturbance_gains,
     disturbance_discrete_gains,
     error_matrix,
 )
-from .checks import _negdef, _posdef, rho_interval, sector_interval
+from ..validate import DECAY, UDOT_BOUND, Range, real
+from .checks import negdef, posdef, rho_interval, sector_interval
 from .results import Margin
 
 __all__ = [
@@ -73,6 +74,8 @@ __all__ = [
 ]
 
 _EW, _ETA = 2, 3
+#: Nominal decay rate a synthesis aims for (1/s): :data:`~bwdesign.validate.DECAY` without 0.
+POSITIVE_DECAY = Range(0.0, DECAY.hi, lo_open=True, unit=DECAY.unit)
 
 
 @dataclass(frozen=True)
@@ -171,9 +174,7 @@ def _problem(
 ) -> _Problem:
     if not isinstance(params, BoucWenParams):
         raise InputError(f"params must be a BoucWenParams, got {type(params).__name__}")
-    udot_max = float(udot_max)
-    if not (math.isfinite(udot_max) and udot_max >= 0):
-        raise InputError(f"udot_max must be a finite rate >= 0 (V/s), got {udot_max}")
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_BOUND)
     if dt is None:
         if discrete_K is not None:
             raise InputError("discrete gains K need dt (the sampled tier)")
@@ -181,7 +182,7 @@ def _problem(
         lw = l3 + l4
         A_o = error_matrix(params, (l1, l2, lw))
         return _Problem("sector", A_o, l3 / lw, sector_interval(params, udot_max), False)
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     if (gains is None) == (discrete_K is None):
         raise InputError("give either continuous gains (l1, l2, l3, l4) or discrete=K")
     if discrete_K is None:
@@ -203,7 +204,7 @@ def _scale(params: BoucWenParams) -> np.ndarray:
 def _check(pr: _Problem, P: np.ndarray) -> tuple[Margin, ...]:
     """The outside check of ``P`` (original coordinates) at every end of the interval."""
     P = (P + P.T) / 2
-    margins = [_posdef("P > 0", P)]
+    margins = [posdef("P > 0", P)]
     off = float(np.max(np.abs(P[:3, 3]))) if P.shape == (4, 4) else math.inf
     scale = float(np.max(np.abs(np.diag(P))))
     margins.append(Margin("P block diagonal (|P[:3, 3]| / max |P_ii|)", off / scale, 1e-12))
@@ -215,12 +216,12 @@ def _check(pr: _Problem, P: np.ndarray) -> tuple[Margin, ...]:
         A = pr.A_o
         M = A.T @ Po @ A - Po if pr.discrete else A.T @ Po + Po @ A
         what = "Phi_o' P_o Phi_o - P_o" if pr.discrete else "He(P_o A_o)"
-        margins.append(_negdef(f"{what} < 0 at {name} = {pr.degenerate:g}", M))
+        margins.append(negdef(f"{what} < 0 at {name} = {pr.degenerate:g}", M))
     for v in others:
         A = pr.vertex(v)
         M = A.T @ P @ A - P if pr.discrete else A.T @ P + P @ A
         what = "A_d' P A_d - P" if pr.discrete else "He(P A)"
-        margins.append(_negdef(f"{what} < 0 at {name} = {v:.6g}{unit}", M))
+        margins.append(negdef(f"{what} < 0 at {name} = {v:.6g}{unit}", M))
     return tuple(margins)
 
 
@@ -367,13 +368,9 @@ def synthesize_disturbance(
     """
     from . import lmi
 
-    dt = _check_dt(dt)
-    decay = float(decay)
-    if not (math.isfinite(decay) and decay > 0):
-        raise InputError(f"decay must be a finite rate > 0 (1/s), got {decay}")
-    udot_max = float(udot_max)
-    if not (math.isfinite(udot_max) and udot_max >= 0):
-        raise InputError(f"udot_max must be a finite rate >= 0 (V/s), got {udot_max}")
+    dt = check_dt(dt)
+    decay = real(decay, "decay (1/s)", within=POSITIVE_DECAY)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_BOUND)
     rho_lo, rho_hi = rho_interval(params, udot_max, dt)
     if rho_hi > 1.0:
         return (

@@ -36,7 +36,8 @@ import numpy as np
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..observers.gains import check_gains, error_matrix
-from .checks import _scale_continuous, sector_interval
+from ..validate import DECAY, UDOT_BOUND, real
+from .checks import scale_continuous, sector_interval
 
 __all__ = [
     "ErrorDynamics",
@@ -53,15 +54,6 @@ def _damping(poles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     wn = np.abs(poles)
     zeta = np.where(wn > 0, -poles.real / np.where(wn > 0, wn, 1.0), -1.0)
     return wn, zeta
-
-
-def _nonneg(value: float, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-        raise InputError(f"{name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or value < 0:
-        raise InputError(f"{name} must be a finite number >= 0, got {value}")
-    return value
 
 
 def error_system(
@@ -96,7 +88,7 @@ def error_system(
 def _scaled_system(params: BoucWenParams, gains: Sequence[float], *, k: float, decay: float):
     import control
 
-    sc = _scale_continuous(params, error_matrix(params, gains))
+    sc = scale_continuous(params, error_matrix(params, gains))
     Ah = sc.Ahat.copy()
     Ah[2, 2] -= k / sc.w
     Ah += (decay / sc.w) * np.eye(3)
@@ -171,10 +163,10 @@ def error_dynamics(
     >>> ed.stable
     True
     """
-    udot_max = _nonneg(udot_max, "udot_max (V/s)")
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_BOUND)
     gains = tuple(check_gains(params, gains).tolist())
     k_int = sector_interval(params, udot_max)
-    sc = _scale_continuous(params, error_matrix(params, gains))
+    sc = scale_continuous(params, error_matrix(params, gains))
     systems, poles, wns, zetas = [], [], [], []
     for k in k_int:
         systems.append(error_system(params, gains, k=k))
@@ -209,7 +201,7 @@ def hinf_norm(
     """
     import control
 
-    decay = _nonneg(decay, "decay (1/s)")
+    decay = real(decay, "decay (1/s)", within=DECAY)
     gains = tuple(check_gains(params, gains).tolist())
     sys_hat, w = _scaled_system(params, gains, k=0.0, decay=decay)
     if float(np.max(np.linalg.eigvals(sys_hat.A).real)) >= 0:

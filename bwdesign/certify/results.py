@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..model.params import BoucWenParams
+from ..validate import Range
 
 __all__ = ["TIERS", "Margin", "TierCertificate", "CertificateReport", "SynthesisResult"]
 
@@ -28,9 +29,11 @@ K_HAT_CAP = 1e3
 #: The one sign convention of every :class:`Margin` (stated in its JSON).
 MARGIN_SENSE = "passed means value < limit (slack = limit - value > 0)"
 
-_U = float(np.finfo(float).eps) / 2  # unit round-off
-_E3 = np.array([0.0, 0.0, 1.0])
-_C = np.array([1.0, 0.0, 0.0])
+#: A contraction factor per sample of the robust certificates: ``0 < a < 1``.
+CONTRACTION = Range(0.0, 1.0, lo_open=True, hi_open=True)
+
+UNIT_ROUNDOFF = float(np.finfo(float).eps) / 2  # unit round-off
+OUTPUT_ROW = np.array([1.0, 0.0, 0.0])
 
 
 # -- data objects -------------------------------------------------------------
@@ -344,7 +347,8 @@ def _plain(obj: Any) -> Any:
     return obj
 
 
-def _frozen(a: np.ndarray) -> np.ndarray:
+def frozen_array(a: np.ndarray) -> np.ndarray:
+    """A read-only float copy of ``a``."""
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a

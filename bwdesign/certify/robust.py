@@ -112,10 +112,10 @@ from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_disturbance_gains, check_gains, discrete_gains
-from ..validate import UDOT_MAX, below_nyquist, real
+from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction, solution
-from .results import Margin
+from .results import CONTRACTION, Margin
 
 __all__ = ["RobustCertificate", "certify_robust"]
 
@@ -323,15 +323,64 @@ def certify_robust(
     require_bounded(params)
     dt = check_sample_time(params, dt)
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
-    noise_max = float(noise_max)
-    if not (math.isfinite(noise_max) and noise_max >= 0):
-        raise InputError(f"noise_max must be finite and >= 0, got {noise_max}")
+    noise_max = real(noise_max, "noise_max", within=NONNEGATIVE)
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError("uncertainty must be an UncertaintyBox")
     if not isinstance(reference, Reference):
         raise InputError(f"reference must be a bwdesign Reference, got {reference!r}")
     below_nyquist(reference, dt)
     require_coverable(reference, dt)
+    l = _observer_gains(params, gains, observer)
+    lp = _loop(params, l, dt, lambda1, lambda2, integral_rate, delay)
+    uncertainty.check(params)  # every corner (so every plant in the box) bounded
+    vertices = uncertainty.vertices(params)
+    rng = np.random.default_rng(seed)
+    interior = uncertainty.sample(params, rng, int(interior_samples))
+    st = _setup(params, lp, observer, udot_max)
+    data_v = [_plant_data(st, tp) for tp in vertices]
+    data_i = [_plant_data(st, tp) for tp in interior]
+    data = data_v + data_i
+    hb, W, input_bounds = _cover(st, reference, data, noise_max)
+    ell = _Ellipsoids.build(st, data_v, data_i, W)
+    base = {
+        "n_vertices": len(vertices),
+        "n_interior": len(interior),
+        "input_bounds": input_bounds,
+        "noise_max": noise_max,
+    }
+    spec = ell.spectral_radius()
+    rho = f"rho in [{st.rho_lo:.6g}, {st.rho_hi:.6g}]"
+    if spec >= 1:
+        why = f"the loop is unstable at a corner of the box (spectral radius {spec:.6g} >= 1 at "
+        return _not_certified(base, why + rho + ")", math.nan, {"spectral_radius": spec})
+    sol, av = _contraction(ell, a, spec, st.statics[0])
+    if sol is None or not sol.ok:
+        status = sol.status if sol is not None else "infeasible for every contraction tried"
+        why = f"no common Lyapunov function over the {len(vertices)} corners and {rho} ({status})"
+        details = {"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []}
+        return _not_certified(base, why, av, details, sol.solver if sol is not None else "")
+    return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, dt, base)
+
+
+def _not_certified(
+    base: dict[str, Any], why: str, a: float, details: dict[str, Any], solver: str = ""
+) -> RobustCertificate:
+    return RobustCertificate(
+        holds=False,
+        status=f"not certified: {why}",
+        decay=None,
+        tracking_bound=None,
+        estimation_bound=None,
+        x3_estimation_bound=None,
+        a=a,
+        solver=solver,
+        details=details,
+        **base,
+    )
+
+
+def _observer_gains(params: BoucWenParams, gains: Any, observer: str) -> np.ndarray:
+    """The 3-state gains the certified loop runs (the PHDO's lumped ``(l1, l2, l3 + l4)``)."""
     if observer not in ("phso", "phdo"):
         raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
     if observer == "phdo":
@@ -341,9 +390,20 @@ def certify_robust(
                 "the robust loop certificate of the PHDO needs l3 = 0 (the hysteresis copy on "
                 f"the model alone, as the digital tuning splits it), got l3 = {l4[2]:g}"
             )
-        l = check_gains(params, (l4[0], l4[1], l4[2] + l4[3]))
-    else:
-        l = check_gains(params, gains)
+        return check_gains(params, (l4[0], l4[1], l4[2] + l4[3]))
+    return check_gains(params, gains)
+
+
+def _loop(
+    params: BoucWenParams,
+    l: np.ndarray,
+    dt: float,
+    lambda1: float,
+    lambda2: float,
+    integral_rate: float | None,
+    delay: bool,
+) -> _Loop:
+    """The model's sampled loop: ZOH matrices, the discrete observer gain and the eq. (12) law."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", TuningWarning)
         ctrl = make_controller(
@@ -351,7 +411,7 @@ def certify_robust(
         )
     Kx, Kr = ctrl.linear_gains()
     zm = discretize(params, dt)
-    lp = _Loop(
+    return _Loop(
         Fm=np.asarray(zm.F),
         gm=np.asarray(zm.g),
         K=discrete_gains(params, l, dt),
@@ -362,75 +422,105 @@ def certify_robust(
         integral=ctrl.integral_rate is not None,
         delay=bool(delay),
     )
-    uncertainty.check(params)  # every corner (so every plant in the box) bounded
-    vertices = uncertainty.vertices(params)
-    rng = np.random.default_rng(seed)
-    interior = uncertainty.sample(params, rng, int(interior_samples))
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every plant of the box shares: the loop, the ``rho`` ends and the output rows."""
+
+    params: BoucWenParams
+    lp: _Loop
+    observer: str
+    udot_max: float
+    du: float
+    rho_lo: float
+    rho_hi: float
+    rhos: tuple[float, ...]
+    M: np.ndarray
+    dM: np.ndarray
+    statics: tuple[np.ndarray, np.ndarray, np.ndarray]
+    cu: np.ndarray
+    su: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.lp.n
+
+
+def _setup(params: BoucWenParams, lp: _Loop, observer: str, udot_max: float) -> _Setup:
+    dt = lp.dt
     rho_lo, rho_hi = rho_interval(params, udot_max, dt)
-    du = udot_max * dt
     # the PHDO's lumped error: rho = 1 in the loop, (rho - 1) e3 an input beside dh
     rhos = (rho_lo, rho_hi) if observer == "phso" else (1.0,)
-
     # the reference terms as functionals of sigma(t) = (x_d, x_d', x_d'') at t, t + dt,
     # t + 2 dt (model.reference_cover): R(t) = M sigma(t) = (x_d, x_d', x_d(t+dt),
     # x_d'(t+dt), uref) and R at the next sample = M1 sigma(t); their supremum over every
-    # t >= 0 is bounded once for all plants below
+    # t >= 0 is bounded once for all plants (_cover)
+    Kx, Kr = lp.Kx, lp.Kr
     kx, kd = Kr[0] + Kx[0], Kr[1] + Kx[1]
     M = np.zeros((5, 9))
     M[[0, 1, 2, 3], [0, 1, 3, 4]] = 1.0
     M[4, :3] = (kx, kd, Kr[2])
     M1 = np.roll(M, 3, axis=1)
     M1[:, :3] = 0.0
-    dM = M1 - M
-
     n = lp.n
     e = np.eye(n)
-    c_track = e[0]
-    c_est = (1 - lp.K[0]) * e[2]
-    c_x3 = e[4] - lp.K[2] * e[2]
+    statics = (e[0], (1 - lp.K[0]) * e[2], e[4] - lp.K[2] * e[2])  # tracking, x1hat, x3hat
     # the applied input u_k = cu' z_k + su' s_k, for the bound on its steps
     cu = np.array([_applied(lp, z, np.zeros(9)) for z in np.eye(n)])
     su = np.array([_applied(lp, np.zeros(n), v) for v in np.eye(9)])
-    statics = (c_track, c_est, c_x3)
+    return _Setup(
+        params, lp, observer, udot_max, udot_max * dt, rho_lo, rho_hi, rhos, M, M1 - M, statics,
+        cu, su,
+    )  # fmt: skip
 
-    def plant_data(tp):
-        """Per plant: its blocks (A, B~) per rho end, channel bounds and the reference rows."""
-        zt = discretize(tp, dt)
-        Fv, gv = np.asarray(zt.F), np.asarray(zt.g)
-        mats = [_matrices(lp, Fv, gv, r) for r in rhos]
-        Bref, bx3 = mats[0][1][:, :5], mats[0][1][:, 5]  # rho acts on neither
-        hv, j, dh = _hyst_bounds(params, tp, du)
-        if observer == "phdo":
-            dh += (1 - rho_lo) * (params.bounded_class().h_max + hv)
-        # quasi-static split (module doc): z = z~ + G^-1 w_slow, G = I - A(rho_c)
-        G = np.eye(n) - np.mean([A for A, _ in mats], axis=0)
-        GiB = np.linalg.solve(G, Bref)  # w_slow's reference part: G^-1 Bref M sigma
-        Gib = np.linalg.solve(G, bx3)
-        rows = [GiB @ dM]  # the increments of the reference terms, per state
-        if len(rhos) == 2:
-            E = (mats[1][0] - mats[0][0]) / (rhos[1] - rhos[0])
-            rows.append(E @ GiB @ M)  # the rho coupling of the quasi-static part
-        rows += [np.array([c @ GiB @ M for c in statics])]
-        for A, _ in mats:  # the input steps' reference part, per rho end (input_step)
-            v = (A - np.eye(n)).T @ cu
-            rows.append(((v @ GiB + cu @ Bref) @ M + su[:5] @ dM)[None, :])
-        blocks = [(A, np.column_stack([np.eye(n), B[:, 6] - Gib, B[:, 7:]])) for A, B in mats]
-        E_b = E if len(rhos) == 2 else None
-        return {
-            "blocks": blocks,
-            "hyst": (hv, j, dh),
-            "mats": mats,
-            "Gib": Gib,
-            "E": E_b,
-            "rows": np.vstack(rows),
-        }
 
-    data_v = [plant_data(tp) for tp in vertices]
-    data_i = [plant_data(tp) for tp in interior]
-    data = data_v + data_i
+def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
+    """Per plant: its blocks (A, B~) per rho end, channel bounds and the reference rows."""
+    lp, n, rhos, M, dM = st.lp, st.n, st.rhos, st.M, st.dM
+    zt = discretize(tp, lp.dt)
+    Fv, gv = np.asarray(zt.F), np.asarray(zt.g)
+    mats = [_matrices(lp, Fv, gv, r) for r in rhos]
+    Bref, bx3 = mats[0][1][:, :5], mats[0][1][:, 5]  # rho acts on neither
+    hv, j, dh = _hyst_bounds(st.params, tp, st.du)
+    if st.observer == "phdo":
+        dh += (1 - st.rho_lo) * (st.params.bounded_class().h_max + hv)
+    # quasi-static split (module doc): z = z~ + G^-1 w_slow, G = I - A(rho_c)
+    G = np.eye(n) - np.mean([A for A, _ in mats], axis=0)
+    GiB = np.linalg.solve(G, Bref)  # w_slow's reference part: G^-1 Bref M sigma
+    Gib = np.linalg.solve(G, bx3)
+    rows = [GiB @ dM]  # the increments of the reference terms, per state
+    if len(rhos) == 2:
+        E = (mats[1][0] - mats[0][0]) / (rhos[1] - rhos[0])
+        rows.append(E @ GiB @ M)  # the rho coupling of the quasi-static part
+    rows += [np.array([c @ GiB @ M for c in st.statics])]
+    for A, _ in mats:  # the input steps' reference part, per rho end (_input_step)
+        v = (A - np.eye(n)).T @ st.cu
+        rows.append(((v @ GiB + st.cu @ Bref) @ M + st.su[:5] @ dM)[None, :])
+    blocks = [(A, np.column_stack([np.eye(n), B[:, 6] - Gib, B[:, 7:]])) for A, B in mats]
+    E_b = E if len(rhos) == 2 else None
+    return {
+        "blocks": blocks,
+        "hyst": (hv, j, dh),
+        "mats": mats,
+        "Gib": Gib,
+        "E": E_b,
+        "rows": np.vstack(rows),
+    }
+
+
+def _cover(
+    st: _Setup, reference: Reference, data: list[dict[str, Any]], noise_max: float
+) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """The reference's terms at every time, per plant; the bound of every input channel.
+
+    Sets ``chan``, ``static`` and ``step_ref`` in each plant's ``data``; returns the
+    worst hysteresis bounds ``(x3, j, dh)``, the channel bounds ``W`` and their report.
+    """
+    n, rhos = st.n, st.rhos
     # sup over every t >= 0 of every reference row, all plants at once (refuses a
     # reference it cannot cover: neither periodic nor settling, or no stated structure)
-    sups = sup_abs(reference, dt, np.vstack([d["rows"] for d in data]))
+    sups = sup_abs(reference, st.lp.dt, np.vstack([d["rows"] for d in data]))
     at = 0
     for d in data:
         m = len(d["rows"])
@@ -441,7 +531,7 @@ def certify_robust(
             chan += (rhos[1] - rhos[0]) / 2 * (d["sup"][n : 2 * n] + np.abs(d["E"] @ d["Gib"]) * hv)
         d["chan"] = chan
         k = 2 * n if d["E"] is not None else n
-        d["static"] = d["sup"][k : k + 3] + np.array([abs(c @ d["Gib"]) * hv for c in statics])
+        d["static"] = d["sup"][k : k + 3] + np.array([abs(c @ d["Gib"]) * hv for c in st.statics])
         d["step_ref"] = d["sup"][k + 3 :]
     chan = np.max([d["chan"] for d in data], axis=0)
     hb = np.max([d["hyst"] for d in data], axis=0)
@@ -453,75 +543,71 @@ def certify_robust(
         "dh": float(hb[2]),
         "noise": noise_max,
     }
+    return hb, W, input_bounds
 
-    def static(i: int) -> float:
-        """Largest quasi-static part ``|c' G^-1 w_slow|`` over the plants (``c = statics[i]``)."""
-        return max(float(d["static"][i]) for d in data)
 
-    keep = W > 0
-    Wk = W[keep]
-    # state scaling: balance the nominal loop, then the square root of the diagonal of
-    # its steady covariance under the normalised inputs, so that P is O(1)
-    (A_nom, B_nom), *_ = plant_data(params)["blocks"]
-    _, (s, _) = matrix_balance(A_nom, permute=False, separate=True)
-    s = np.asarray(s, float)
-    if float(np.max(np.abs(np.linalg.eigvals(A_nom)))) < 1:
-        Ab = A_nom * s[None, :] / s[:, None]
-        Bb = B_nom[:, keep] * Wk[None, :] / s[:, None]
-        X = solve_discrete_lyapunov(Ab, Bb @ Bb.T)
-        s = s * np.sqrt(np.maximum(np.diag(X), 1e-12 * float(np.max(np.diag(X)))))
+@dataclass
+class _Ellipsoids:
+    """The scaled LMI blocks of every plant and the solves of the common ellipsoid.
 
-    def scaled(A, B):
-        Bs = B[:, keep] * Wk[None, :]
-        return A * s[None, :] / s[:, None], Bs / s[:, None]
+    Corners that differ only in (alpha, beta, gamma) share their blocks (the
+    hysteresis enters through the global input bounds): each distinct corner block is
+    imposed once, and an interior block only once a solution violates it (``active``,
+    kept across the solves of one certificate).
+    """
 
-    blocks_v = [scaled(A, B) for d in data_v for (A, B) in d["blocks"]]
-    blocks_i = [scaled(A, B) for d in data_i for (A, B) in d["blocks"]]
-    base = {
-        "n_vertices": len(vertices),
-        "n_interior": len(interior),
-        "input_bounds": input_bounds,
-        "noise_max": noise_max,
-    }
-    spec = max(float(np.max(np.abs(np.linalg.eigvals(A)))) for A, _ in blocks_v + blocks_i)
-    if spec >= 1:
-        return RobustCertificate(
-            holds=False,
-            status=(
-                f"not certified: the loop is unstable at a corner of the box (spectral radius "
-                f"{spec:.6g} >= 1 at rho in [{rho_lo:.6g}, {rho_hi:.6g}])"
-            ),
-            decay=None,
-            tracking_bound=None,
-            estimation_bound=None,
-            x3_estimation_bound=None,
-            a=math.nan,
-            details={"spectral_radius": spec},
-            **base,
-        )
-    from . import lmi
+    blocks: list[tuple[np.ndarray, np.ndarray]]
+    n_corner: int
+    s: np.ndarray
+    active: dict[bytes, int] = field(default_factory=dict)
 
-    blocks = blocks_v + blocks_i
-    # Corners that differ only in (alpha, beta, gamma) share their blocks (the
-    # hysteresis enters through the global input bounds): impose each distinct corner
-    # block once, and an interior block only once the solution violates it.
-    active: dict[bytes, int] = {}
-    for i, (A, B) in enumerate(blocks_v):
-        active.setdefault(A.tobytes() + B.tobytes(), i)
+    @classmethod
+    def build(
+        cls, st: _Setup, data_v: list[dict], data_i: list[dict], W: np.ndarray
+    ) -> _Ellipsoids:
+        keep = W > 0
+        Wk = W[keep]
+        # state scaling: balance the nominal loop, then the square root of the diagonal of
+        # its steady covariance under the normalised inputs, so that P is O(1)
+        (A_nom, B_nom), *_ = _plant_data(st, st.params)["blocks"]
+        _, (s, _) = matrix_balance(A_nom, permute=False, separate=True)
+        s = np.asarray(s, float)
+        if float(np.max(np.abs(np.linalg.eigvals(A_nom)))) < 1:
+            Ab = A_nom * s[None, :] / s[:, None]
+            Bb = B_nom[:, keep] * Wk[None, :] / s[:, None]
+            X = solve_discrete_lyapunov(Ab, Bb @ Bb.T)
+            s = s * np.sqrt(np.maximum(np.diag(X), 1e-12 * float(np.max(np.diag(X)))))
 
-    def attempt(av: float, c: np.ndarray):
+        def scaled(A, B):
+            Bs = B[:, keep] * Wk[None, :]
+            return A * s[None, :] / s[:, None], Bs / s[:, None]
+
+        blocks_v = [scaled(A, B) for d in data_v for (A, B) in d["blocks"]]
+        blocks_i = [scaled(A, B) for d in data_i for (A, B) in d["blocks"]]
+        ell = cls(blocks_v + blocks_i, len(blocks_v), s)
+        for i, (A, B) in enumerate(blocks_v):
+            ell.active.setdefault(A.tobytes() + B.tobytes(), i)
+        return ell
+
+    def spectral_radius(self) -> float:
+        return max(float(np.max(np.abs(np.linalg.eigvals(A)))) for A, _ in self.blocks)
+
+    def attempt(self, av: float, c: np.ndarray) -> Any:
         """Solve on the distinct corner blocks plus the violated interior ones."""
+        from . import lmi
+
+        blocks, active = self.blocks, self.active
         while True:
             idx = sorted(active.values())
             sol = lmi.robust_ellipsoid(
-                [blocks[i][0] for i in idx], [blocks[i][1] for i in idx], s * c, a=av
+                [blocks[i][0] for i in idx], [blocks[i][1] for i in idx], self.s * c, a=av
             )
             if not sol.ok:
                 return sol
             Q, lam = solution(sol)
             bad = [
                 i
-                for i in range(len(blocks_v), len(blocks))
+                for i in range(self.n_corner, len(blocks))
                 if i not in idx and schur_min_eig(Q, lam, *blocks[i], av) <= _ACTIVE_TOL
             ]
             if not bad:
@@ -529,12 +615,18 @@ def certify_robust(
             for i in bad:
                 active.setdefault(blocks[i][0].tobytes() + blocks[i][1].tobytes(), i)
 
-    def check(sol, av: float):
+    def check(self, sol: Any, av: float, st: _Setup, data: list[dict]):
+        """The outside check of every block, and the bounds of ``sol``'s ellipsoid.
+
+        Returns ``(margins, peak, dyn)``: ``dyn(c)`` bounds ``|c'z~|`` on the ellipsoid,
+        ``peak(i)`` the whole ``|c'z|`` for ``c = statics[i]`` (plus its quasi-static part).
+        """
+        s = self.s
         Q, lam = solution(sol)
         margins = [Margin("Q > 0", -float(np.linalg.eigvalsh(Q).min()), 0.0)]
-        for idx, (A, B) in enumerate(blocks):
+        for idx, (A, B) in enumerate(self.blocks):
             ev = schur_min_eig(Q, lam, A, B, av)
-            where = "corner" if idx < len(blocks_v) else "interior"
+            where = "corner" if idx < self.n_corner else "interior"
             margins.append(Margin(f"Schur block {idx} ({where}) > 0", -ev, 0.0))
         gam = float(lam.sum())
 
@@ -543,85 +635,87 @@ def certify_robust(
             return math.sqrt(max(gam, 0.0) * float(cs @ Q @ cs))
 
         def peak(i):
-            return dyn(statics[i]) + static(i)
+            # the largest quasi-static part |c' G^-1 w_slow| over the plants
+            return dyn(st.statics[i]) + max(float(d["static"][i]) for d in data)
 
         return margins, peak, dyn
 
-    def input_step(dyn) -> float:
-        """Bound on ``|u_{k+1} - u_k|`` in steady state, over every plant and rho end.
 
-        ``u_{k+1} - u_k = v' z_k + cu' B s_k + su' (s_{k+1} - s_k)`` with
-        ``v = (A - I)' cu``, ``z = z~ + G^-1 w_slow`` and ``x3_{k+1} - x3_k = j_k``.
-        """
-        worst = 0.0
-        j_, dh_ = float(hb[1]), float(hb[2])
-        for d in data:
-            Gib, hv = d["Gib"], d["hyst"][0]
-            for (A, B), ref in zip(d["mats"], d["step_ref"], strict=True):
-                v = (A - np.eye(n)).T @ cu
-                total = (
-                    dyn(v)
-                    + float(ref)
-                    + abs(v @ Gib + cu @ B[:, 5]) * hv
-                    + abs(su[5]) * j_
-                    + (abs(cu @ B[:, 6]) + 2 * abs(su[6])) * j_
-                    + (abs(cu @ B[:, 7]) + 2 * abs(su[7])) * dh_
-                    + (abs(cu @ B[:, 8]) + 2 * abs(su[8])) * noise_max
-                )
-                worst = max(worst, total)
-        return worst
+def _input_step(st: _Setup, data: list[dict], dyn, hb: np.ndarray, noise_max: float) -> float:
+    """Bound on ``|u_{k+1} - u_k|`` in steady state, over every plant and rho end.
 
-    if a is None:
-        # the contraction on x = log(1 - a): a coarse grid, then golden section
-        rad = spec**2
-        lo, hi = math.log(1e-5), math.log(1 - rad)
-        best = None
-        cache: dict[float, Any] = {}
+    ``u_{k+1} - u_k = v' z_k + cu' B s_k + su' (s_{k+1} - s_k)`` with
+    ``v = (A - I)' cu``, ``z = z~ + G^-1 w_slow`` and ``x3_{k+1} - x3_k = j_k``.
+    """
+    cu, su, n = st.cu, st.su, st.n
+    worst = 0.0
+    j_, dh_ = float(hb[1]), float(hb[2])
+    for d in data:
+        Gib, hv = d["Gib"], d["hyst"][0]
+        for (A, B), ref in zip(d["mats"], d["step_ref"], strict=True):
+            v = (A - np.eye(n)).T @ cu
+            total = (
+                dyn(v)
+                + float(ref)
+                + abs(v @ Gib + cu @ B[:, 5]) * hv
+                + abs(su[5]) * j_
+                + (abs(cu @ B[:, 6]) + 2 * abs(su[6])) * j_
+                + (abs(cu @ B[:, 7]) + 2 * abs(su[7])) * dh_
+                + (abs(cu @ B[:, 8]) + 2 * abs(su[8])) * noise_max
+            )
+            worst = max(worst, total)
+    return worst
 
-        def f(x: float) -> float:
-            av = 1 - math.exp(x)
-            if x not in cache:
-                sol = attempt(av, c_track)
-                cache[x] = (sol, av, sol.objective if sol.ok else math.inf)
-            return cache[x][2]
 
-        grid = np.linspace(lo, hi, _A_GRID + 2)[1:-1]
-        search_log_contraction(f, grid, _A_REFINE, lo=lo, hi=hi)
-        ok = [v for v in cache.values() if v[0].ok]
-        if ok:
-            best = min(ok, key=lambda v: v[2])
-        sol, av = (best[0], best[1]) if best else (None, math.nan)
-    else:
-        av = float(a)
-        if not 0 < av < 1:
-            raise InputError(f"a must be in (0, 1), got {av}")
-        sol = attempt(av, c_track)
-    if sol is None or not sol.ok:
-        status = sol.status if sol is not None else "infeasible for every contraction tried"
-        return RobustCertificate(
-            holds=False,
-            status=(
-                f"not certified: no common Lyapunov function over the {len(vertices)} corners "
-                f"and rho in [{rho_lo:.6g}, {rho_hi:.6g}] ({status})"
-            ),
-            decay=None,
-            tracking_bound=None,
-            estimation_bound=None,
-            x3_estimation_bound=None,
-            a=av,
-            solver=sol.solver if sol is not None else "",
-            details={"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []},
-            **base,
-        )
-    margins, peak, dyn = check(sol, av)
+def _contraction(ell: _Ellipsoids, a: float | None, spec: float, c: np.ndarray):
+    """``(solution, a)``: at the given contraction, or the one with the smallest bound."""
+    if a is not None:
+        av = real(a, "a", within=CONTRACTION)
+        return ell.attempt(av, c), av
+    # the contraction on x = log(1 - a): a coarse grid, then golden section
+    rad = spec**2
+    lo, hi = math.log(1e-5), math.log(1 - rad)
+    best = None
+    cache: dict[float, Any] = {}
+
+    def f(x: float) -> float:
+        av = 1 - math.exp(x)
+        if x not in cache:
+            sol = ell.attempt(av, c)
+            cache[x] = (sol, av, sol.objective if sol.ok else math.inf)
+        return cache[x][2]
+
+    grid = np.linspace(lo, hi, _A_GRID + 2)[1:-1]
+    search_log_contraction(f, grid, _A_REFINE, lo=lo, hi=hi)
+    ok = [v for v in cache.values() if v[0].ok]
+    if ok:
+        best = min(ok, key=lambda v: v[2])
+    return (best[0], best[1]) if best else (None, math.nan)
+
+
+def _conclude(
+    st: _Setup,
+    ell: _Ellipsoids,
+    data: list[dict],
+    solved: tuple[Any, float],
+    hb: np.ndarray,
+    noise_max: float,
+    spec: float,
+    dt: float,
+    base: dict[str, Any],
+) -> RobustCertificate:
+    """The certificate of a solved ellipsoid: outside check, bounds, decay and status."""
+    sol, av = solved
+    params, lp = st.params, st.lp
+    margins, peak, dyn = ell.check(sol, av, st, data)
     holds = all(m.passed for m in margins)
-    step = input_step(dyn) if holds else None
+    step = _input_step(st, data, dyn, hb, noise_max) if holds else None
     bounds = [peak(0), None, None]
     # the estimation bounds: their own objective at the same contraction
     for i in (1, 2):
-        s2 = attempt(av, statics[i])
+        s2 = ell.attempt(av, st.statics[i])
         if s2.ok:
-            m2, pk, _ = check(s2, av)
+            m2, pk, _ = ell.check(s2, av, st, data)
             if all(m.passed for m in m2):
                 bounds[i] = pk(i)
         if bounds[i] is None and holds:
@@ -632,10 +726,11 @@ def certify_robust(
         bounds[2] += abs(lp.K[2]) * noise_max
     decay = -math.log(av) / (2 * dt)
     worst = max(margins, key=lambda m: m.value - m.limit)
+    udot_max = st.udot_max
     if holds:
         status = (
-            f"certified over {len(vertices)} corners (+{len(interior)} interior points): "
-            f"steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
+            f"certified over {base['n_vertices']} corners (+{base['n_interior']} interior "
+            f"points): steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
             f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s, "
             f"for a loop whose input keeps |u'| <= {udot_max:.4g} {params.input_unit}/s (an "
             "assumption: this certificate bounds the loop's own input rate only by "
@@ -658,8 +753,8 @@ def certify_robust(
         solver=sol.solver,
         details={
             "spectral_radius": spec,
-            "rho_interval": [rho_lo, rho_hi],
-            "observer": observer,
+            "rho_interval": [st.rho_lo, st.rho_hi],
+            "observer": st.observer,
             "udot_max": udot_max,
             "dt": dt,
             "input_step_bound": step,

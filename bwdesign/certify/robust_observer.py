@@ -66,11 +66,11 @@ from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import _as_gains, check_gains, discrete_gains
-from ..validate import POLE_RADIUS, UDOT_MAX, real
+from ..observers.gains import as_gains, check_gains, discrete_gains
+from ..validate import NONNEGATIVE, POLE_RADIUS, SIGNAL, UDOT_MAX, integer, real
 from .checks import continuous_equivalent, rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction
-from .results import Margin
+from .results import CONTRACTION, Margin
 
 __all__ = [
     "RobustObserverCertificate",
@@ -252,20 +252,19 @@ def _problem(
 ) -> _Problem:
     require_bounded(params)
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
-    noise_max = float(noise_max)
-    if not (math.isfinite(noise_max) and noise_max >= 0):
-        raise InputError(f"noise_max must be finite and >= 0, got {noise_max}")
+    noise_max = real(noise_max, "noise_max", within=NONNEGATIVE)
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError("uncertainty must be an UncertaintyBox")
     uncertainty.check(params, bounded=False)  # a box leaving the class: "no", not an error
     try:
-        u_lo, u_hi = (float(v) for v in input_range)
+        u_lo, u_hi = input_range
     except (TypeError, ValueError):
         raise InputError(f"input_range must be (u_lo, u_hi), got {input_range!r}") from None
-    if not (math.isfinite(u_lo) and math.isfinite(u_hi) and u_lo < u_hi):
+    u_lo = real(u_lo, "input_range u_lo (V)", within=SIGNAL)
+    u_hi = real(u_hi, "input_range u_hi (V)", within=SIGNAL)
+    if not u_lo < u_hi:
         raise InputError(f"input_range must be finite with u_lo < u_hi, got {input_range!r}")
-    if isinstance(interior_samples, bool) or not isinstance(interior_samples, int):
-        raise InputError(f"interior_samples must be an integer >= 0, got {interior_samples!r}")
+    interior_samples = integer(interior_samples, "interior_samples", within=NONNEGATIVE)
     vertices = uncertainty.vertices(params)
     interior = uncertainty.sample(params, np.random.default_rng(seed), interior_samples)
     rho = rho_interval(params, udot_max, dt)
@@ -407,9 +406,7 @@ def _certify_K(pb: _Problem, K: np.ndarray, a: float | None) -> RobustObserverCe
         ok = [v for v in cache.values() if v[0].ok]
         sol, av = min(ok, key=lambda v: v[2])[:2] if ok else (None, math.nan)
     else:
-        av = float(a)
-        if not 0 < av < 1:
-            raise InputError(f"a must be in (0, 1), got {av}")
+        av = real(a, "a", within=CONTRACTION)
         sol = attempt(av, targets["x1"])
     if sol is None or not sol.ok:
         why = sol.status if sol is not None else "infeasible for every contraction tried"
@@ -524,7 +521,7 @@ def certify_robust_observer(
     if discrete is None:
         K = discrete_gains(params, check_gains(params, gains), dt)
     else:
-        K = np.asarray(_as_gains(discrete, "discrete gains K"), float)
+        K = np.asarray(as_gains(discrete, "discrete gains K"), float)
     pb = _problem(
         params,
         dt=dt,
@@ -624,8 +621,6 @@ def synthesize_robust_observer(
     -------
     RobustObserverSynthesis
     """
-    from . import lmi
-
     if target not in ("x1", "x3"):
         raise InputError(f"target must be 'x1' or 'x3', got {target!r}")
     dt = check_sample_time(params, dt)
@@ -649,20 +644,7 @@ def synthesize_robust_observer(
             False, None, None, None, target, None, f"not certified: {why}"
         )
     T = np.array([1.0, math.sqrt(params.a1), 1.0])
-    Fs = pb.F * T[None, :] / T[:, None]
-    Bs = pb.Bw / T[:, None]
-    c = T * (_C if target == "x1" else np.eye(3)[2])
-    cache: dict[float, Any] = {}
-
-    def f(x: float) -> float:
-        if x not in cache:
-            sol = lmi.robust_observer_synthesis(
-                Fs, Bs, c, rho=pb.rho, a=1 - math.exp(x), noise=pb.noise, disk=disk
-            )
-            cache[x] = (sol, sol.objective if sol.ok else math.inf, 1 - math.exp(x))
-        return cache[x][1]
-
-    search_log_contraction(f, [math.log(1 - a) for a in _GRID], 5)
+    cache = _synthesis_lmis(pb, T, target, disk)
     ok = [v for v in cache.values() if v[0].ok]
     if not ok:
         last = next(iter(cache.values()))[0]
@@ -682,22 +664,7 @@ def synthesize_robust_observer(
     P = np.asarray(sol["P"])
     Ks = np.linalg.solve((P + P.T) / 2, np.asarray(sol["Y"]).reshape(3))
     K = tuple(float(f"{v:.10g}") for v in T * Ks)
-    with warnings.catch_warnings():  # logm's accuracy note: the result is verified anyway
-        warnings.simplefilter("ignore", RuntimeWarning)
-        gains = continuous_equivalent(params, K, dt)
-    try:
-        if gains is not None:
-            cert = certify_robust_observer(params, gains, **opts)
-        else:
-            cert = certify_robust_observer(params, discrete=K, **opts)
-    except GainError as err:  # continuous equivalent outside the Hurwitz conditions (4)
-        gains = None
-        cert = certify_robust_observer(params, discrete=K, **opts)
-        note = f" (its continuous equivalent is not admissible: {err})"
-    else:
-        note = (
-            "" if gains is not None else "; the discrete poles have no exact continuous equivalent"
-        )
+    gains, cert, note = _recertify(params, K, opts)
     bound = (
         None
         if not cert.holds
@@ -720,3 +687,57 @@ def synthesize_robust_observer(
         solver=sol.solver,
         status=sol.status,
     )
+
+
+def _synthesis_lmis(
+    pb: _Problem, T: np.ndarray, target: str, disk: tuple[float, float] | None
+) -> dict[float, Any]:
+    """The synthesis LMI over the contraction search: ``{log(1 - a): (sol, objective, a)}``.
+
+    Solved in the state scaling ``T = diag(1, sqrt(a1), 1)``; the objective is the
+    squared peak of the ``target`` error (``inf`` where the solve failed).
+    """
+    from . import lmi
+
+    Fs = pb.F * T[None, :] / T[:, None]
+    Bs = pb.Bw / T[:, None]
+    c = T * (_C if target == "x1" else np.eye(3)[2])
+    cache: dict[float, Any] = {}
+
+    def f(x: float) -> float:
+        if x not in cache:
+            sol = lmi.robust_observer_synthesis(
+                Fs, Bs, c, rho=pb.rho, a=1 - math.exp(x), noise=pb.noise, disk=disk
+            )
+            cache[x] = (sol, sol.objective if sol.ok else math.inf, 1 - math.exp(x))
+        return cache[x][1]
+
+    search_log_contraction(f, [math.log(1 - a) for a in _GRID], 5)
+    return cache
+
+
+def _recertify(
+    params: BoucWenParams, K: tuple[float, ...], opts: dict[str, Any]
+) -> tuple[np.ndarray | None, RobustObserverCertificate, str]:
+    """``(continuous gains or None, certificate, note)`` of the rounded synthesised ``K``.
+
+    Certified with its exact continuous equivalent when one exists and is admissible,
+    else with ``discrete=K``.
+    """
+    with warnings.catch_warnings():  # logm's accuracy note: the result is verified anyway
+        warnings.simplefilter("ignore", RuntimeWarning)
+        gains = continuous_equivalent(params, K, opts["dt"])
+    try:
+        if gains is not None:
+            cert = certify_robust_observer(params, gains, **opts)
+        else:
+            cert = certify_robust_observer(params, discrete=K, **opts)
+    except GainError as err:  # continuous equivalent outside the Hurwitz conditions (4)
+        gains = None
+        cert = certify_robust_observer(params, discrete=K, **opts)
+        note = f" (its continuous equivalent is not admissible: {err})"
+    else:
+        note = (
+            "" if gains is not None else "; the discrete poles have no exact continuous equivalent"
+        )
+    return gains, cert, note

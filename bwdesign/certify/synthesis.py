@@ -15,19 +15,19 @@ from ..model.plant import check_sample_time, discretize
 from ..observers.gains import check_gains, delta_transition, discrete_gains, error_matrix
 from ..validate import DECAY, POLE_RADIUS, UDOT_MAX, real
 from .checks import (
-    _lipschitz_coefficient,
-    _model_matrix,
-    _prepare_sampled,
-    _scale_continuous,
-    _similar,
     continuous_equivalent,
+    lipschitz_coefficient,
+    model_matrix,
+    prepare_sampled,
     rho_exponents,
     rho_interval,
+    scale_continuous,
     sector_interval,
+    similar,
 )
 from .frequency import continuous_family, sampled_family
-from .results import _C, K_HAT_CAP, CertificateReport, Margin, SynthesisResult
-from .tiers import _largest_decay, _largest_rate, certify, certify_discrete
+from .results import K_HAT_CAP, OUTPUT_ROW, CertificateReport, Margin, SynthesisResult
+from .tiers import certify, certify_discrete, largest_decay, largest_rate
 
 __all__ = ["synthesize", "default_pole_radius"]
 
@@ -187,13 +187,13 @@ def _pole_disk(
     if dt is None:
         if gains is None:
             return Margin("max |pole| (rad/s)", math.inf, R)
-        lam = np.linalg.eigvals(_similar(error_matrix(params, gains), T) / w) * w
+        lam = np.linalg.eigvals(similar(error_matrix(params, gains), T) / w) * w
         return Margin("max |pole| of A0 - l C (rad/s)", float(np.max(np.abs(lam))), R)
     if K is None:
         return Margin("max |z - 1|", math.inf, -math.expm1(-R * dt))
     F, Fd = delta_transition(params, dt)
     Ad1 = Fd - np.outer(np.asarray(K) / dt, F[0])
-    d = np.linalg.eigvals(_similar(Ad1, T) / w) * w
+    d = np.linalg.eigvals(similar(Ad1, T) / w) * w
     return Margin(
         "max |z - 1| of the discrete poles", float(dt * np.max(np.abs(d))), -math.expm1(-R * dt)
     )
@@ -252,7 +252,7 @@ def _exact_score(
         gl = tuple(check_gains(params, gains).tolist())
     except GainError:
         return -math.inf
-    sc = _scale_continuous(params, error_matrix(params, gl))
+    sc = scale_continuous(params, error_matrix(params, gl))
     g = abs(params.gamma)
     if dt is None:
         if not mu < -sc.spectral_abscissa():
@@ -260,7 +260,7 @@ def _exact_score(
         fam = continuous_family(sc.Ahat, sc.w)
         a, b = min(0.0, params.beta - g), max(0.0, params.beta + g)
         return 1.0 - v * fam.inverse_envelope(a, b, mu)
-    sp = _prepare_sampled(params, discrete_gains(params, gl, dt), dt)
+    sp = prepare_sampled(params, discrete_gains(params, gl, dt), dt)
     fam = sampled_family(sp.Ad1, sp.b, sp.s, sp.w, dt)
     if not mu < fam.decay_cap():
         return -math.inf
@@ -387,13 +387,13 @@ def _diagnose(
         if at_zero or lmi_zero:
             best = 0.0
             if lmi_zero:  # the LMI's own answer, as a lower bound
-                best = _largest_decay(lambda m: attempt(udot_max, m, True).ok, decay)
+                best = largest_decay(lambda m: attempt(udot_max, m, True).ok, decay)
             at_zero.sort(key=lambda c: float(np.max(c.poles.real)))
             for c in at_zero[:BEST_OF]:
                 cap = decay
                 best = max(
                     best,
-                    _largest_decay(
+                    largest_decay(
                         lambda m, g=c.gains: _exact_score(params, g, udot_max, m, dt) > 0, cap
                     ),
                 )
@@ -446,14 +446,14 @@ def _best_envelope(
 ) -> float:
     """Largest exact envelope (V/s) at ``decay`` over the candidates (bisection in ``v``)."""
     best = 0.0
-    c_coef = _lipschitz_coefficient(params)
+    c_coef = lipschitz_coefficient(params)
     if c_coef == 0:
         return math.inf
     probe = 1e-3 * K_HAT_CAP * math.sqrt(params.a1) / c_coef
     ranked = sorted(cands, key=lambda c: -_exact_score(params, c.gains, probe, decay, dt))
     for c in ranked[:BEST_OF]:
         if _exact_score(params, c.gains, best * (1 + 1e-3) if best > 0 else 1e-300, decay, dt) > 0:
-            v, _ = _largest_rate(
+            v, _ = largest_rate(
                 lambda v, g=c.gains: _exact_score(params, g, v, decay, dt) > 0,
                 max(best, 1.0),
                 K_HAT_CAP * math.sqrt(params.a1) / c_coef,
@@ -470,8 +470,8 @@ def _synthesize_continuous(
 
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])
-    A0h = _similar(_model_matrix(params), T) / w
-    Ch = _C * T
+    A0h = similar(model_matrix(params), T) / w
+    Ch = OUTPUT_ROW * T
 
     def attempt(v: float, m: float, disk: bool, t_min: float | None = None) -> _Attempt:
         k_lo, k_hi = sector_interval(params, v)
@@ -511,7 +511,7 @@ def _synthesize_sampled(
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])
     F = np.array(discretize(params, dt).F)
-    Fh = _similar(F, T)
+    Fh = similar(F, T)
     Hh = F[0] * T
     disk = (1.0, -math.expm1(-R * dt))
 

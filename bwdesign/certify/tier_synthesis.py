@@ -38,7 +38,7 @@ import numpy as np
 
 from ..model.params import BoucWenParams
 from ..observers.gains import error_matrix
-from .checks import _lipschitz_coefficient
+from .checks import lipschitz_coefficient
 from .results import Margin, SynthesisResult
 from .tiers import certify
 
@@ -162,7 +162,7 @@ def synthesize_tier(
     re-certifies them with the ``sampled`` tier too; feasible needs both to hold.
     """
     w0, s, Ahat = _scaled(params)
-    c = _lipschitz_coefficient(params)
+    c = lipschitz_coefficient(params)
     mu = decay / w0
     R = math.inf if pole_radius is None else float(pole_radius)
     radius = None if pole_radius is None else R / w0

@@ -84,36 +84,35 @@ from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import _as_gains, check_gains, discrete_gains, error_matrix
+from ..observers.gains import as_gains, check_gains, discrete_gains, error_matrix
 from ..validate import DECAY, UDOT_MAX, real
 from .checks import (
-    _Check,
-    _check_lipschitz,
-    _check_sampled,
-    _check_sector,
-    _cont_err,
-    _lipschitz_candidates,
-    _lipschitz_coefficient,
-    _posdef,
-    _prepare_sampled,
-    _scale_continuous,
-    _Scaled,
-    _verify_lipschitz,
-    _verify_sector,
+    Check,
+    Scaled,
+    check_lipschitz,
+    check_sampled,
+    check_sector,
+    continuous_error,
+    lipschitz_candidates,
+    lipschitz_coefficient,
+    posdef,
+    prepare_sampled,
     rho_exponents,
     rho_interval,
+    scale_continuous,
     sector_interval,
+    verify_lipschitz,
+    verify_sector,
 )
 from .frequency import continuous_family, sampled_family
 from .results import (
-    _U,
     BISECT_RTOL,
-    K_HAT_CAP,
     TIERS,
+    UNIT_ROUNDOFF,
     CertificateReport,
     Margin,
     TierCertificate,
-    _frozen,
+    frozen_array,
 )
 from .robust_observer import certify_robust_observer
 from .verified import (
@@ -132,7 +131,7 @@ __all__ = ["certify", "certify_discrete"]
 # -- bisections ---------------------------------------------------------------------
 
 
-def _largest_rate(
+def largest_rate(
     pred: Callable[[float], bool], start: float, cap: float, rtol: float = BISECT_RTOL
 ) -> tuple[float, bool]:
     """Largest ``v`` in ``(0, cap]`` with ``pred(v)`` (monotone), to ``rtol``.
@@ -173,7 +172,7 @@ def _largest_rate(
     return lo, False
 
 
-def _largest_decay(pred: Callable[[float], bool], cap: float, rtol: float = BISECT_RTOL) -> float:
+def largest_decay(pred: Callable[[float], bool], cap: float, rtol: float = BISECT_RTOL) -> float:
     """Largest ``mu`` in ``[0, cap)`` with ``pred(mu)``, to ``rtol`` (0 if none)."""
     if not (cap > 0 and math.isfinite(cap)) or not pred(0.0):
         return 0.0
@@ -193,11 +192,6 @@ def _largest_decay(pred: Callable[[float], bool], cap: float, rtol: float = BISE
         else:
             hi = mid
     return lo
-
-
-def _search_cap(params: BoucWenParams) -> float:
-    c = _lipschitz_coefficient(params)
-    return K_HAT_CAP * math.sqrt(params.a1) / c if c > 0 else math.inf
 
 
 def _stated_envelope(envelope: float, decay: float, claims: Claims) -> tuple[float | None, bool]:
@@ -220,8 +214,8 @@ def _exact_tier(
     udot_max: float,
     decay: float,
     envelope: float,
-    check: Callable[[], _Check],
-    candidates: Sequence[tuple[str, Callable[[], _Check]]],
+    check: Callable[[], Check],
+    candidates: Sequence[tuple[str, Callable[[], Check]]],
     decay_rate: Callable[[], float],
     details: dict[str, Any],
     claims: Claims,
@@ -239,11 +233,11 @@ def _exact_tier(
     ill-conditioned for double precision (``cond u > UNDECIDABLE``).
     """
     cond, damping = claims.conditioning(decay)
-    hopeless = cond * _U > UNDECIDABLE  # no P can pass the outside check: not tried
+    hopeless = cond * UNIT_ROUNDOFF > UNDECIDABLE  # no P can pass the outside check: not tried
     if hopeless:
         claims = claims.without_riccati()
     exact_ok = udot_max < envelope
-    main: _Check | None = claims.first(udot_max, decay) if exact_ok else None
+    main: Check | None = claims.first(udot_max, decay) if exact_ok else None
     source = "kyp" if main is not None else ""
     if main is None and exact_ok and not hopeless:
         main, source = check(), "lmi"
@@ -330,11 +324,11 @@ def _exact_tier(
 
 
 def _theorem1(
-    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float, prev: dict
+    params: BoucWenParams, sc: Scaled, udot_max: float, decay: float, prev: dict
 ) -> TierCertificate:
     from . import lmi
 
-    c = _lipschitz_coefficient(params)
+    c = lipschitz_coefficient(params)
     L = c * udot_max
     A = sc.A
 
@@ -366,11 +360,11 @@ def _theorem1(
 
     results = []
     for label, P, solver in candidates:
-        pos = _posdef("P > 0", P)
+        pos = posdef("P > 0", P)
         M = A.T @ P + P @ A
-        err = float(np.linalg.norm(_cont_err(A, P, 0.0), "fro"))
+        err = float(np.linalg.norm(continuous_error(A, P, 0.0), "fro"))
         q = -(float(np.linalg.eigvalsh((M + M.T) / 2).max()) + err)
-        nP = float(np.linalg.eigvalsh(P).max()) * (1 + 8 * _U)
+        nP = float(np.linalg.eigvalsh(P).max()) * (1 + 8 * UNIT_ROUNDOFF)
         ok_P = pos.passed and q > 0 and nP > 0
         results.append((label, P, solver, pos, q, nP, ok_P))
 
@@ -424,7 +418,7 @@ def _theorem1(
         max_udot=max_udot,
         max_udot_capped=False,
         decay_rate=rate if holds else None,
-        P=_frozen(P) if holds else None,
+        P=frozen_array(P) if holds else None,
         margins=margins,
         solver=solver,
         status=status,
@@ -442,13 +436,13 @@ def _circle_envelope(fam: Any, lo: float, hi: float, mu: float, alpha0: float) -
 
 def _continuous_exact(
     name: str,
-    sc: _Scaled,
+    sc: Scaled,
     udot_max: float,
     decay: float,
     lo: float,
     hi: float,
-    check: Callable[[], _Check],
-    candidates: Sequence[tuple[str, Callable[[], _Check]]],
+    check: Callable[[], Check],
+    candidates: Sequence[tuple[str, Callable[[], Check]]],
     details: dict[str, Any],
     claims: Claims,
 ) -> TierCertificate:
@@ -472,16 +466,16 @@ def _continuous_exact(
 
 
 def _lipschitz(
-    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float, prev: dict
+    params: BoucWenParams, sc: Scaled, udot_max: float, decay: float, prev: dict
 ) -> TierCertificate:
-    c = _lipschitz_coefficient(params)
+    c = lipschitz_coefficient(params)
     L = c * udot_max
     cands = []
     th = prev.get("theorem1")
     if th is not None and th.holds:
-        for P in _lipschitz_candidates(np.asarray(th.P), L):
+        for P in lipschitz_candidates(np.asarray(th.P), L):
             cands.append(
-                ("theorem1", lambda P=P: _verify_lipschitz(sc, L, decay, P, th.solver, None))
+                ("theorem1", lambda P=P: verify_lipschitz(sc, L, decay, P, th.solver, None))
             )
     return _continuous_exact(
         "lipschitz",
@@ -490,7 +484,7 @@ def _lipschitz(
         decay,
         -c,
         c,
-        lambda: _check_lipschitz(sc, L, decay),
+        lambda: check_lipschitz(sc, L, decay),
         cands,
         {"L": L},
         lipschitz_claims(params, sc),
@@ -498,7 +492,7 @@ def _lipschitz(
 
 
 def _sector(
-    params: BoucWenParams, sc: _Scaled, udot_max: float, decay: float, prev: dict
+    params: BoucWenParams, sc: Scaled, udot_max: float, decay: float, prev: dict
 ) -> TierCertificate:
     k_lo, k_hi = sector_interval(params, udot_max)
     g = abs(params.gamma)
@@ -510,7 +504,7 @@ def _sector(
             cands.append(
                 (
                     name,
-                    lambda P=Pc, s=cert.solver: _verify_sector(sc, k_lo, k_hi, decay, P, s, None),
+                    lambda P=Pc, s=cert.solver: verify_sector(sc, k_lo, k_hi, decay, P, s, None),
                 )
             )
     return _continuous_exact(
@@ -520,7 +514,7 @@ def _sector(
         decay,
         min(0.0, params.beta - g),
         max(0.0, params.beta + g),
-        lambda: _check_sector(sc, k_lo, k_hi, decay),
+        lambda: check_sector(sc, k_lo, k_hi, decay),
         cands,
         {"k_interval": [k_lo, k_hi]},
         sector_claims(params, sc),
@@ -530,8 +524,8 @@ def _sector(
 def _sampled(
     params: BoucWenParams, K: np.ndarray, udot_max: float, decay: float, dt: float
 ) -> TierCertificate:
-    sp = _prepare_sampled(params, K, dt)
-    c = _lipschitz_coefficient(params)
+    sp = prepare_sampled(params, K, dt)
+    c = lipschitz_coefficient(params)
     fam = sampled_family(sp.Ad1, sp.b, sp.s, sp.w, dt)
     cap = fam.decay_cap()
 
@@ -555,7 +549,7 @@ def _sampled(
         udot_max=udot_max,
         decay=decay,
         envelope=env,
-        check=lambda: _check_sampled(sp, x_lo, x_hi, decay),
+        check=lambda: check_sampled(sp, x_lo, x_hi, decay),
         candidates=(),
         decay_rate=lambda: fam.largest_decay(lambda m: feasible(udot_max, m)),
         details={
@@ -652,24 +646,9 @@ def certify(
         dt = check_sample_time(params, dt)
     gains = tuple(check_gains(params, gains).tolist())
     if uncertainty is not None:
-        if dt is None or input_range is None:
-            raise InputError(
-                "a robust certificate over the uncertainty box needs the sample time dt (s) "
-                "and the input range (u_lo, u_hi)"
-            )
-        if not isinstance(uncertainty, UncertaintyBox):
-            raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
-        uncertainty.check(params, bounded=False)  # a box leaving the class: "no", not an error
-    sc = _scale_continuous(params, error_matrix(params, gains))
-    if tiers is None:
-        wanted = TIERS if dt is not None else TIERS[:3]
-    else:
-        wanted = tuple(tiers) if not isinstance(tiers, str) else (tiers,)
-        unknown = [t for t in wanted if t not in TIERS]
-        if unknown:
-            raise InputError(f"unknown tier(s) {unknown}; tiers are {', '.join(TIERS)}")
-        if "sampled" in wanted and dt is None:
-            raise InputError("the sampled tier needs the sample time dt (s)")
+        _check_robust_request(params, uncertainty, dt, input_range)
+    sc = scale_continuous(params, error_matrix(params, gains))
+    wanted = _wanted_tiers(tiers, dt)
     certs = []
     prev: dict[str, TierCertificate] = {}
     for name in TIERS:
@@ -704,6 +683,36 @@ def certify(
     )
 
 
+def _check_robust_request(
+    params: BoucWenParams,
+    uncertainty: Any,
+    dt: float | None,
+    input_range: tuple[float, float] | None,
+) -> None:
+    """A robust certificate needs ``dt``, the input range and a box of usable corners."""
+    if dt is None or input_range is None:
+        raise InputError(
+            "a robust certificate over the uncertainty box needs the sample time dt (s) "
+            "and the input range (u_lo, u_hi)"
+        )
+    if not isinstance(uncertainty, UncertaintyBox):
+        raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
+    uncertainty.check(params, bounded=False)  # a box leaving the class: "no", not an error
+
+
+def _wanted_tiers(tiers: Sequence[str] | str | None, dt: float | None) -> tuple[str, ...]:
+    """The tiers asked for (default: every tier, ``sampled`` only with ``dt``)."""
+    if tiers is None:
+        return TIERS if dt is not None else TIERS[:3]
+    wanted = tuple(tiers) if not isinstance(tiers, str) else (tiers,)
+    unknown = [t for t in wanted if t not in TIERS]
+    if unknown:
+        raise InputError(f"unknown tier(s) {unknown}; tiers are {', '.join(TIERS)}")
+    if "sampled" in wanted and dt is None:
+        raise InputError("the sampled tier needs the sample time dt (s)")
+    return wanted
+
+
 def certify_discrete(
     params: BoucWenParams,
     K: Sequence[float],
@@ -736,7 +745,7 @@ def certify_discrete(
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
     decay = real(decay, "decay (1/s)", within=DECAY)
     dt = check_sample_time(params, dt)
-    Kv = np.asarray(_as_gains(K, "discrete gains K"))
+    Kv = np.asarray(as_gains(K, "discrete gains K"))
     cert = _sampled(params, Kv, udot_max, decay, dt)
     return CertificateReport(
         params=params,

@@ -27,20 +27,20 @@ import numpy as np
 
 from ..model.params import BoucWenParams
 from .checks import (
-    _Check,
-    _dare_candidates,
-    _kyp_candidates,
-    _lipschitz_coefficient,
-    _Sampled,
-    _Scaled,
-    _verify_lipschitz,
-    _verify_sampled,
-    _verify_sector,
+    Check,
+    Sampled,
+    Scaled,
+    dare_candidates,
+    kyp_candidates,
+    lipschitz_coefficient,
     rho_exponents,
     sector_interval,
+    verify_lipschitz,
+    verify_sampled,
+    verify_sector,
 )
 from .frequency import RankOneFamily, continuous_family, sampled_family
-from .results import _U, K_HAT_CAP, REL_MARGIN
+from .results import K_HAT_CAP, REL_MARGIN, UNIT_ROUNDOFF
 
 __all__ = [
     "BACKOFF",
@@ -99,14 +99,14 @@ def _conditioning(fam: RankOneFamily, mu: float) -> tuple[float, float]:
     return cond, damping
 
 
-def continuous_conditioning(sc: _Scaled, mu: float) -> tuple[float, float]:
+def continuous_conditioning(sc: Scaled, mu: float) -> tuple[float, float]:
     """Conditioning of the poles against the decay line ``Re s = -mu`` (the matrix norm over
     its distance to a matrix with a pole on that line) and their relative damping (distance
     to that line over ``|lambda|``), continuous tiers."""
     return _conditioning(continuous_family(sc.Ahat, sc.w), mu)
 
 
-def delta_conditioning(sp: _Sampled, mu: float) -> tuple[float, float]:
+def delta_conditioning(sp: Sampled, mu: float) -> tuple[float, float]:
     """The same for the sampled tier: the delta-form poles against the circle ``|z| = r``."""
     return _conditioning(sampled_family(sp.Ad1, sp.b, sp.s, sp.w, sp.dt), mu)
 
@@ -116,8 +116,8 @@ def undecided_reason(cond: float, mu: float) -> str:
     return (
         "double precision cannot decide this tier's envelope: no Lyapunov matrix passed the "
         "outside check down to half the frequency-domain estimate; round-off in the error "
-        f"matrix is {cond * _U:.2g} of its distance to a matrix with a pole on the decay line "
-        f"(rate {mu:g} 1/s; conditioning {cond:.3g})"
+        f"matrix is {cond * UNIT_ROUNDOFF:.2g} of its distance to a matrix with a pole on the "
+        f"decay line (rate {mu:g} 1/s; conditioning {cond:.3g})"
     )
 
 
@@ -153,11 +153,11 @@ class Claims:
     """
 
     candidates: Callable[[float, float], Iterable[np.ndarray]]
-    check: Callable[[np.ndarray, float, float], _Check]
+    check: Callable[[np.ndarray, float, float], Check]
     cap: float
     conditioning: Callable[[float], tuple[float, float]]
 
-    def first(self, v: float, mu: float) -> _Check | None:
+    def first(self, v: float, mu: float) -> Check | None:
         """The first Riccati matrix that passes the check at ``(v, mu)``, or ``None``."""
         for P in self.candidates(v, mu):
             c = self.check(P, v, mu)
@@ -179,28 +179,28 @@ class Claims:
         return replace(self, candidates=lambda v, mu: ())
 
 
-def lipschitz_claims(params: BoucWenParams, sc: _Scaled) -> Claims:
-    c = _lipschitz_coefficient(params)
+def lipschitz_claims(params: BoucWenParams, sc: Scaled) -> Claims:
+    c = lipschitz_coefficient(params)
 
     def cands(v: float, mu: float) -> Iterable[np.ndarray]:
-        return _kyp_candidates(sc, -c * v, c * v, mu) if math.isfinite(c * v) else ()
+        return kyp_candidates(sc, -c * v, c * v, mu) if math.isfinite(c * v) else ()
 
     return Claims(
         candidates=cands,
-        check=lambda P, v, mu: _verify_lipschitz(sc, c * v, mu, P, "scipy", None),
+        check=lambda P, v, mu: verify_lipschitz(sc, c * v, mu, P, "scipy", None),
         cap=K_HAT_CAP * sc.w / c if c > 0 else math.inf,
         conditioning=lambda mu: continuous_conditioning(sc, mu),
     )
 
 
-def sector_claims(params: BoucWenParams, sc: _Scaled) -> Claims:
-    c = _lipschitz_coefficient(params)
+def sector_claims(params: BoucWenParams, sc: Scaled) -> Claims:
+    c = lipschitz_coefficient(params)
 
     def cands(v: float, mu: float) -> Iterable[np.ndarray]:
-        return _kyp_candidates(sc, *sector_interval(params, v), mu) if math.isfinite(v) else ()
+        return kyp_candidates(sc, *sector_interval(params, v), mu) if math.isfinite(v) else ()
 
-    def check(P: np.ndarray, v: float, mu: float) -> _Check:
-        return _verify_sector(sc, *sector_interval(params, v), mu, P, "scipy", None)
+    def check(P: np.ndarray, v: float, mu: float) -> Check:
+        return verify_sector(sc, *sector_interval(params, v), mu, P, "scipy", None)
 
     return Claims(
         candidates=cands,
@@ -210,10 +210,10 @@ def sector_claims(params: BoucWenParams, sc: _Scaled) -> Claims:
     )
 
 
-def sampled_claims(params: BoucWenParams, sp: _Sampled) -> Claims:
+def sampled_claims(params: BoucWenParams, sp: Sampled) -> Claims:
     """Also at ``v = inf`` when ``beta >= |gamma|`` (the jump-map slope then stays in [0, 1])."""
     dt = sp.dt
-    c = _lipschitz_coefficient(params)
+    c = lipschitz_coefficient(params)
 
     def ends(v: float) -> tuple[float, float] | None:
         if math.isinf(v):
@@ -225,13 +225,13 @@ def sampled_claims(params: BoucWenParams, sp: _Sampled) -> Claims:
         x = ends(v)
         if x is None:
             return ()
-        return _dare_candidates(sp, -math.expm1(x[1]) / dt, -math.expm1(x[0]) / dt, mu)
+        return dare_candidates(sp, -math.expm1(x[1]) / dt, -math.expm1(x[0]) / dt, mu)
 
-    def check(P: np.ndarray, v: float, mu: float) -> _Check:
+    def check(P: np.ndarray, v: float, mu: float) -> Check:
         x = ends(v)
         if x is None:
-            return _Check(False, None, (), "", "not certified: the rho interval is unbounded")
-        return _verify_sampled(sp, x[0], x[1], mu, P, "scipy", None)
+            return Check(False, None, (), "", "not certified: the rho interval is unbounded")
+        return verify_sampled(sp, x[0], x[1], mu, P, "scipy", None)
 
     return Claims(
         candidates=cands,

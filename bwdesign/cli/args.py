@@ -9,15 +9,11 @@ import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from ..errors import BWDesignError
+from ..errors import UsageError
 
 EXIT_OK, EXIT_NO, EXIT_BAD_INPUT = 0, 1, 2
 #: Exit code after Ctrl-C (SIGINT): 128 + 2, as shells report a process SIGINT ended.
 EXIT_INTERRUPTED = 130
-
-
-class UsageError(BWDesignError, ValueError):
-    """Bad command-line input."""
 
 
 #: A token that is a value, never an option: a negative number or a list of numbers

@@ -50,13 +50,14 @@ from ..certify.disturbance import LumpedCertificate, certify_disturbance
 from ..certify.results import CertificateReport
 from ..certify.synthesis import synthesize as synthesize_gains
 from ..certify.tiers import certify, certify_discrete
+from ..control.controllers import DiscreteTrackingController
 from ..control.loop import controller_from_config
 from ..control.tuning import digital_tuning
-from ..errors import ConfigError, InputError, NotCertifiedError
+from ..errors import ConfigError, InputError, InternalError, NotCertifiedError
 from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.plant import discretize
-from ..observers.base import _SampledObserver
+from ..observers.base import SampledObserver
 from ..observers.gains import gains_for_observer
 from ..observers.sampled import (
     DisturbanceHysteresisObserver,
@@ -70,7 +71,7 @@ from .literals import CTypes
 __all__ = ["OBSERVERS", "CExport", "export_c", "c_sources"]
 
 #: The sampled observers the C library carries, by the name ``--observer`` takes.
-OBSERVERS: dict[str, tuple[type[_SampledObserver], str]] = {
+OBSERVERS: dict[str, tuple[type[SampledObserver], str]] = {
     "phso": (HysteresisObserver, "hysteresis observer (PHSO, paper eq. 3)"),
     "eso": (ExtendedStateObserver, "extended state observer (ESO, paper eq. 21)"),
     "phdo": (
@@ -116,7 +117,7 @@ def _fill(name: str, **values: Any) -> str:
     try:
         return _template(name).substitute(values)
     except KeyError as err:  # a template asks for a value the exporter does not give
-        raise RuntimeError(f"template {name}: no value for ${err.args[0]}") from None
+        raise InternalError(f"template {name}: no value for ${err.args[0]}") from None
 
 
 def _check_prefix(prefix: str) -> str:
@@ -379,21 +380,7 @@ def c_sources(
     gains, K, rep, controller, phdo = _gains(config, gains_from, dt, udot_max)
     summary = _summary(config, rep, udot_max, dt, gains_from, phdo)
     if not summary["certified"] and not allow_uncertified:
-        if gains is None and K is None:
-            why = "synthesis found no certified gains"
-        else:
-            whys = []
-            if summary["tier"] is None:
-                whys.append(
-                    f"no certificate tier holds for these gains at |u'| <= {udot_max:.6g} V/s, "
-                    f"dt = {dt:g} s"
-                )
-            if not phdo.certificate.holds:
-                whys.append(
-                    f"the PHDO's lumped error is not certified for its gains ({phdo.origin}) "
-                    f"at |u'| <= {udot_max:.6g} V/s, dt = {dt:g} s: {phdo.certificate.status}"
-                )
-            why = "; ".join(whys)
+        why = _uncertified_reason(summary, gains, K, phdo, udot_max, dt)
         raise NotCertifiedError(f"{why}; nothing exported (--allow-uncertified exports anyway)")
     if gains is None and K is None:
         raise NotCertifiedError("synthesis found no gains to export")
@@ -406,6 +393,98 @@ def c_sources(
         "version": __version__,
         **names,
     }
+    Ks = _observer_gains(params, gains, K, phdo, dt, allow_unbounded)
+    zoh = discretize(params, dt)
+    proto, impl, zoh_step = _observer_code(ct, base, Ks, zoh)
+    ctl = config.controller
+    l1, l2 = (
+        (ctl.lambda1, ctl.lambda2) if ctl is not None else (controller.lambda1, controller.lambda2)
+    )
+    law = _law_code(ct, controller, dt, gains_from, (l1, l2))
+    comment = _comment(summary, gains, Ks, params, phdo)
+    header_vals = dict(
+        base,
+        guard=f"{prefix.upper()}_H",
+        summary=comment,
+        dt=lit(dt),
+        udot_max=lit(udot_max),
+        udot_max_comment=_udot_max_comment(summary),
+        du_max=lit(udot_max * dt),
+        length_unit=params.length_unit,
+        input_unit=params.input_unit,
+        observer_prototypes="\n".join(proto),
+        controller_form=law["controller_form"],
+        lambda1=f"{l1:g}",
+        lambda2=f"{l2:g}",
+    )
+    source_vals = dict(
+        base,
+        stage=params.name or "(unnamed)",
+        sha256=config.sha256 or "-",
+        **zoh_step,
+        **{k: lit(getattr(params, k)) for k in ("alpha", "beta", "gamma", "a1", "a2", "a3")},
+        **law,
+        length_unit=params.length_unit,
+        input_unit=params.input_unit,
+        observers="".join(impl),
+    )
+    init_dispatch, step_dispatch = _harness_dispatch(prefix, list(_THREE_STATE))
+    harness = _fill(
+        "harness.c.tmpl",
+        **base,
+        default_observer=observer,
+        init_dispatch=init_dispatch,
+        step_dispatch=step_dispatch,
+    )
+    document = {
+        "bwdesign": __version__,
+        "precision": precision,
+        "prefix": prefix,
+        "harness_observer": observer,
+        "certificate": summary,
+        "gains": None if gains is None else list(gains),
+        "observers": _observers_document(Ks, phdo),
+        "controller": controller.to_dict(),
+        "eq12": {"lambda1": l1, "lambda2": l2},
+        "model": {
+            "F": [list(zoh.F[0]), list(zoh.F[1])],
+            "g": [float(zoh.g[0]), float(zoh.g[1])],
+            "plant": params.to_dict(),
+        },
+    }
+    out = {
+        f"{prefix}.h": _fill("header.h.tmpl", **header_vals),
+        f"{prefix}.c": _fill("source.c.tmpl", **source_vals),
+        "harness.c": harness,
+        "export.json": dump_json(document) + "\n",
+    }
+    return out, summary["certified"], summary, document
+
+
+def _uncertified_reason(
+    summary: dict[str, Any], gains: Any, K: Any, phdo: Any, udot_max: float, dt: float
+) -> str:
+    """Why an export is refused: what is not certified, at which envelope."""
+    if gains is None and K is None:
+        return "synthesis found no certified gains"
+    whys = []
+    if summary["tier"] is None:
+        whys.append(
+            f"no certificate tier holds for these gains at |u'| <= {udot_max:.6g} V/s, "
+            f"dt = {dt:g} s"
+        )
+    if not phdo.certificate.holds:
+        whys.append(
+            f"the PHDO's lumped error is not certified for its gains ({phdo.origin}) "
+            f"at |u'| <= {udot_max:.6g} V/s, dt = {dt:g} s: {phdo.certificate.status}"
+        )
+    return "; ".join(whys)
+
+
+def _observer_gains(
+    params: Any, gains: Any, K: Any, phdo: Any, dt: float, allow_unbounded: bool
+) -> dict[str, list[float]]:
+    """The discrete gain ``K`` of every exported observer, as the Python observers run it."""
     observers = {
         name: cls(params, gains, dt, allow_unbounded=allow_unbounded)
         if K is None
@@ -420,9 +499,14 @@ def c_sources(
             params, dt=dt, discrete=phdo.K, allow_unbounded=allow_unbounded
         )
     )
-    Ks = {name: [float(k) for k in obs.K] for name, obs in observers.items()}
-    zoh = discretize(params, dt)
-    (f11, f12, f13), (f21, f22, f23) = zoh.F[0], zoh.F[1]
+    return {name: [float(k) for k in obs.K] for name, obs in observers.items()}
+
+
+def _observer_code(
+    ct: CTypes, base: dict[str, str], Ks: dict[str, list[float]], zoh: Any
+) -> tuple[list[str], list[str], dict[str, str]]:
+    """The observers' prototypes and implementations, and the ZOH step's constants and bodies."""
+    lit = ct.literal
     proto, impl = [], []
     for name in _THREE_STATE:
         cls, title = OBSERVERS[name]
@@ -444,10 +528,19 @@ def c_sources(
             correct_body=zoh_step["correct_body"],
         )
     )
-    ctl = config.controller
-    l1, l2 = (
-        (ctl.lambda1, ctl.lambda2) if ctl is not None else (controller.lambda1, controller.lambda2)
-    )
+    return proto, impl, zoh_step
+
+
+def _law_code(
+    ct: CTypes,
+    controller: DiscreteTrackingController,
+    dt: float,
+    gains_from: str,
+    lambdas: tuple[float, float],
+) -> dict[str, str]:
+    """The controller's values in ``source.c``: gains, saturation, integrator, description."""
+    lit = ct.literal
+    ck1, ck2 = (float(k) for k in controller.gains)
     limits = controller.u_limits
     saturation = ""
     if limits is not None:
@@ -461,92 +554,36 @@ def c_sources(
         if controller.integral_rate is not None
         else ""
     )
-    ck1, ck2 = (float(k) for k in controller.gains)
     form = (
         f"lambda1 = {controller.lambda1:g}, lambda2 = {controller.lambda2:g}"
         + (f", integral rate {controller.integral_rate:g}" if controller.integral_rate else "")
         + (", digital tuning" if gains_from == "digital" else "")
     )
-    comment = _comment(summary, gains, Ks, params, phdo)
-    header_vals = dict(
-        base,
-        guard=f"{prefix.upper()}_H",
-        summary=comment,
-        dt=lit(dt),
-        udot_max=lit(udot_max),
-        udot_max_comment=_udot_max_comment(summary),
-        du_max=lit(udot_max * dt),
-        length_unit=params.length_unit,
-        input_unit=params.input_unit,
-        observer_prototypes="\n".join(proto),
-        controller_form=form,
-        lambda1=f"{l1:g}",
-        lambda2=f"{l2:g}",
-    )
-    source_vals = dict(
-        base,
-        stage=params.name or "(unnamed)",
-        sha256=config.sha256 or "-",
-        **zoh_step,
-        alpha=lit(params.alpha),
-        beta=lit(params.beta),
-        gamma=lit(params.gamma),
-        a1=lit(params.a1),
-        a2=lit(params.a2),
-        a3=lit(params.a3),
-        ck1=lit(ck1),
-        ck2=lit(ck2),
-        cki=lit(controller.ki),
-        half_dt=lit(0.5 * dt),
-        lambda1_lit=lit(l1),
-        lambda2_lit=lit(l2),
-        saturation=saturation,
-        integrate=integrate,
-        controller_form=form,
-        length_unit=params.length_unit,
-        input_unit=params.input_unit,
-        observers="".join(impl),
-    )
-    init_dispatch, step_dispatch = _harness_dispatch(prefix, list(_THREE_STATE))
-    harness = _fill(
-        "harness.c.tmpl",
-        **base,
-        default_observer=observer,
-        init_dispatch=init_dispatch,
-        step_dispatch=step_dispatch,
-    )
-    document = {
-        "bwdesign": __version__,
-        "precision": precision,
-        "prefix": prefix,
-        "harness_observer": observer,
-        "certificate": summary,
-        "gains": None if gains is None else list(gains),
-        "observers": {
-            **{name: {"K": Ks[name]} for name in _THREE_STATE},
-            "phdo": {
-                "K": Ks["phdo"],
-                "gains": None if phdo.gains is None else list(phdo.gains),
-                "gains_from": phdo.origin,
-                "controller_input": "lumped (x1, x2, x3 + d): PREFIX_phdo_lumped",
-                "certificate": phdo.certificate.to_dict(),
-            },
-        },
-        "controller": controller.to_dict(),
-        "eq12": {"lambda1": l1, "lambda2": l2},
-        "model": {
-            "F": [[f11, f12, f13], [f21, f22, f23]],
-            "g": [float(zoh.g[0]), float(zoh.g[1])],
-            "plant": params.to_dict(),
+    return {
+        "ck1": lit(ck1),
+        "ck2": lit(ck2),
+        "cki": lit(controller.ki),
+        "half_dt": lit(0.5 * dt),
+        "lambda1_lit": lit(lambdas[0]),
+        "lambda2_lit": lit(lambdas[1]),
+        "saturation": saturation,
+        "integrate": integrate,
+        "controller_form": form,
+    }
+
+
+def _observers_document(Ks: dict[str, list[float]], phdo: Any) -> dict[str, Any]:
+    """``export.json``'s ``observers``: each observer's ``K``; the PHDO's gains and certificate."""
+    return {
+        **{name: {"K": Ks[name]} for name in _THREE_STATE},
+        "phdo": {
+            "K": Ks["phdo"],
+            "gains": None if phdo.gains is None else list(phdo.gains),
+            "gains_from": phdo.origin,
+            "controller_input": "lumped (x1, x2, x3 + d): PREFIX_phdo_lumped",
+            "certificate": phdo.certificate.to_dict(),
         },
     }
-    out = {
-        f"{prefix}.h": _fill("header.h.tmpl", **header_vals),
-        f"{prefix}.c": _fill("source.c.tmpl", **source_vals),
-        "harness.c": harness,
-        "export.json": dump_json(document) + "\n",
-    }
-    return out, summary["certified"], summary, document
 
 
 def _zoh_step(ct: CTypes, zoh) -> dict[str, str]:

@@ -16,7 +16,7 @@ from .controllers import (
     solve_jump,
 )
 from .systems import closed_loop_matrix, loop_systems
-from .tuning import DigitalTuning, digital_tuning, observer_gains
+from .tuning import DigitalTuning, MarginRequirements, digital_tuning, observer_gains
 
 __all__ = [
     "TrackingController",
@@ -39,4 +39,5 @@ __all__ = [
     "observer_gains",
     "digital_tuning",
     "DigitalTuning",
+    "MarginRequirements",
 ]

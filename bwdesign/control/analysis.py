@@ -11,8 +11,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..observers.gains import _as_gains
-from .systems import LoopSystems, _gain_interval, _stable, loop_systems
+from ..observers.gains import as_gains
+from .systems import LoopSystems, gain_interval, loop_systems, stability
 
 __all__ = ["LoopAnalysis", "MismatchSweep", "analyze_loop", "mismatch_sweep", "stability_interval"]
 
@@ -207,40 +207,23 @@ def analyze_loop(
         with np.errstate(divide="ignore"):
             poles_s = np.log(poles.astype(complex)) / dt
         rho = float(np.max(np.abs(poles)))
-    stable, _ = _stable(sy.A_cl, dt)
+    stable, _ = stability(sy.A_cl, dt)
     maxre = float(np.max(poles_s.real))
 
-    gm = _gain_interval(sy.with_loop_gain, dt)
+    gm = gain_interval(sy.with_loop_gain, dt)
     if stable and gm[0] >= 0:
         up = gm[1]
         down = 1.0 / gm[0] if gm[0] > 0 else math.inf
         gm_db = 20 * math.log10(min(up, down))
     else:
         gm_db = math.nan
-    pm, wc = math.nan, math.nan
-    import control
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # python-control's 'poly'->'frd' note
-            # 'frd' directly for sampled loops (python-control's 'poly' step fails on them and
-            # falls back anyway); 'best' for continuous loops ('frd' needs a grid there)
-            method = "frd" if dt else "best"
-            _, pms, _, _, wgc, _ = control.stability_margins(sy.loop, returnall=True, method=method)
-        pms = np.atleast_1d(np.asarray(pms, dtype=float))
-        wgc = np.atleast_1d(np.asarray(wgc, dtype=float))
-        ok = np.isfinite(pms) & np.isfinite(wgc)
-        if np.any(ok):
-            i = int(np.argmin(np.abs(np.where(ok, pms, np.inf))))
-            pm, wc = float(pms[i]), float(wgc[i])
-    except Exception:  # python-control may fail on degenerate loops; margins stay nan
-        pass
+    pm, wc = _phase_margin(sy.loop, dt)
     ok_dm = math.isfinite(pm) and pm > 0 and math.isfinite(wc) and wc > 0
     dm = math.radians(pm) / wc if ok_dm else math.nan
     return LoopAnalysis(
         lambda1=float(lambda1),
         lambda2=float(lambda2),
-        gains=None if estimator == "state" else tuple(float(v) for v in _as_gains(gains)),
+        gains=None if estimator == "state" else tuple(float(v) for v in as_gains(gains)),
         dt=dt,
         integral_rate=integral_rate,
         form=form,
@@ -306,6 +289,29 @@ class MismatchSweep:
         }
 
 
+def _phase_margin(loop: Any, dt: float | None) -> tuple[float, float]:
+    """``(phase margin deg, crossover rad/s)`` nearest -1 of the broken loop (nan when none)."""
+    pm, wc = math.nan, math.nan
+    import control
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # python-control's 'poly'->'frd' note
+            # 'frd' directly for sampled loops (python-control's 'poly' step fails on them and
+            # falls back anyway); 'best' for continuous loops ('frd' needs a grid there)
+            method = "frd" if dt else "best"
+            _, pms, _, _, wgc, _ = control.stability_margins(loop, returnall=True, method=method)
+        pms = np.atleast_1d(np.asarray(pms, dtype=float))
+        wgc = np.atleast_1d(np.asarray(wgc, dtype=float))
+        ok = np.isfinite(pms) & np.isfinite(wgc)
+        if np.any(ok):
+            i = int(np.argmin(np.abs(np.where(ok, pms, np.inf))))
+            pm, wc = float(pms[i]), float(wgc[i])
+    except Exception:  # python-control may fail on degenerate loops; margins stay nan
+        pass
+    return pm, wc
+
+
 def _perturbed(params: BoucWenParams, parameter: str, delta: float) -> BoucWenParams:
     if parameter not in ("a1", "a2", "a3"):
         raise InputError(f"parameter must be one of a1, a2, a3, got {parameter!r}")
@@ -340,7 +346,7 @@ def stability_interval(
             lti=False,
             **kw,
         ).A_cl
-        return _stable(A, dt)[0]
+        return stability(A, dt)[0]
 
     if not ok(0.0):
         return (math.nan, math.nan)

@@ -73,9 +73,10 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GainError, InputError
+from ..errors import GainError, InputError, TuningWarning
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize, hysteresis_increment
+from ..model.plant import check_dt, discretize, hysteresis_increment
+from ..validate import LAMBDA, real
 
 __all__ = [
     "TrackingController",
@@ -89,10 +90,6 @@ __all__ = [
     "solve_jump",
     "discrete_integral_gains",
 ]
-
-
-class TuningWarning(UserWarning):
-    """A tuning outside the paper's proof (e.g. ``lambda2 <= 3/2``) but not invalid."""
 
 
 def eq12(
@@ -169,12 +166,8 @@ class ControlTerms:
 
 
 def _positive(value: Any, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
-        raise GainError(f"{name} must be a number (1/s), got {value!r}")
-    value = float(value)
-    if not math.isfinite(value) or value <= 0:
-        raise GainError(f"{name} must be a finite number > 0 (1/s), got {value}")
-    return value
+    """A rate of the law (1/s) in :data:`bwdesign.validate.LAMBDA`, or ``GainError``."""
+    return real(value, f"{name} (1/s)", within=LAMBDA, error=GainError)
 
 
 def _limits(u_limits: Any) -> tuple[float, float] | None:
@@ -253,7 +246,7 @@ def discrete_error_gains(
     ndarray, shape (2,)
         V per length unit, V per (length unit/s).
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     zoh = discretize(params, dt)
     w0 = math.sqrt(params.a1)
     s = np.array([1.0, 1.0 / w0])
@@ -495,7 +488,7 @@ class DiscreteTrackingController(TrackingController):
             estimate_limits=estimate_limits,
             hysteresis_jump=hysteresis_jump,
         )
-        self.dt = _check_dt(dt)
+        self.dt = check_dt(dt)
         if integral_rate is None:
             self.gains = discrete_error_gains(params, self.lambda1, self.lambda2, self.dt)
         else:
@@ -585,7 +578,7 @@ def discrete_integral_gains(
     ndarray, shape (3,)
         V per length unit, V per (length unit/s), V per (length unit s).
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     zoh = discretize(params, dt)
     w0 = math.sqrt(params.a1)
     s = np.array([1.0, 1.0 / w0, 1.0 / dt])

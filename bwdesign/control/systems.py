@@ -46,8 +46,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize
-from ..observers.gains import _as_gains, discrete_gains
+from ..model.plant import check_dt, discretize
+from ..observers.gains import as_gains, discrete_gains
 from .controllers import TrackingController, TuningWarning, make_controller
 
 __all__ = ["loop_systems", "closed_loop_matrix"]
@@ -188,7 +188,7 @@ def loop_systems(
     if dt is None and (form == "discrete" or delay):
         raise InputError("the discrete form and the computation delay need a sample time dt (s)")
     if dt is not None:
-        dt = _check_dt(dt)
+        dt = check_dt(dt)
     tp = params if true_params is None else true_params
     ctrl = _ctrl(params, lambda1, lambda2, form, dt, integral_rate)
     Kx, Kr = ctrl.linear_gains()
@@ -221,30 +221,11 @@ def loop_systems(
     if estimator == "state":
         if delay or integral:
             raise InputError("the state-feedback comparison is defined without delay or integrator")
-        Kst = Kxs[:2]  # u = Kx[:2] x (+ a1/a3 x3: a disturbance feed-through)
-        Ctrl = Pst = L = None
-        if lti:
-            Ctrl = control.ss([], [], [], Kst[None, :], ts)
-            Pst = control.ss(Ap, Bp[:, None], np.eye(2), 0.0, ts)
-            L = control.ss(Ap, Bp[:, None], -Kst[None, :], 0.0, ts)
-        A_cl = Ap + np.outer(Bp, Kst)
-        return LoopSystems(
-            Pst, Ctrl, L, A_cl, Bp.copy(), np.zeros(n), Kr, False, dt, np.outer(Bp, Kst)
-        )
+        return _state_feedback(Ap, Bp, Kxs, Kr, dt, lti)
 
-    l = _as_gains(gains)
+    l = as_gains(gains)
     if dt is None:
-        A0 = np.array([[0.0, 1.0, 0.0], [-params.a1, -params.a2, -params.a1], [0.0, 0.0, 0.0]])
-        B0 = s3 * np.array([0.0, params.a3, 0.0])
-        A0 = s3[:, None] * A0 / s3[None, :]
-        ls = s3 * l
-        # xhat' = (A0 - l C) xhat + B0 u + l y ; u = Kx xhat
-        Ac = A0 - np.outer(ls, _C3) + np.outer(B0, Kxs)
-        Bc = ls[:, None]
-        Cc = Kxs[None, :]
-        Dc = np.zeros((1, 1))
-        b_ff = B0
-        b_int = np.zeros(3)
+        Ac, Bc, Cc, Dc, b_ff, b_int = _continuous_controller(params, l, s3, Kxs)
         ref_advance = False
         plant_ff = 1.0
     else:
@@ -283,12 +264,45 @@ def loop_systems(
     return LoopSystems(P, Ctrl, L, A_cl, B_ff, B_int, Kr, ref_advance, dt, A_in)
 
 
+def _state_feedback(
+    Ap: np.ndarray, Bp: np.ndarray, Kxs: np.ndarray, Kr: Any, dt: float | None, lti: bool
+) -> LoopSystems:
+    """The true-state-feedback comparison loop ``u = Kx[:2] x`` (scaled plant ``Ap, Bp``)."""
+    ts = dt if dt else 0
+    Kst = Kxs[:2]  # u = Kx[:2] x (+ a1/a3 x3: a disturbance feed-through)
+    Ctrl = Pst = L = None
+    if lti:
+        import control
+
+        Ctrl = control.ss([], [], [], Kst[None, :], ts)
+        Pst = control.ss(Ap, Bp[:, None], np.eye(2), 0.0, ts)
+        L = control.ss(Ap, Bp[:, None], -Kst[None, :], 0.0, ts)
+    A_cl = Ap + np.outer(Bp, Kst)
+    return LoopSystems(Pst, Ctrl, L, A_cl, Bp.copy(), np.zeros(2), Kr, False, dt, np.outer(Bp, Kst))
+
+
+def _continuous_controller(
+    params: BoucWenParams, l: np.ndarray, s3: np.ndarray, Kxs: np.ndarray
+) -> tuple[np.ndarray, ...]:
+    """``(Ac, Bc, Cc, Dc, b_ff, b_int)`` of the continuous observer and eq. (12), scaled by ``s3``.
+
+    ``xhat' = (A0 - l C) xhat + B0 u + l y``, ``u = Kx xhat``.
+    """
+    A0 = np.array([[0.0, 1.0, 0.0], [-params.a1, -params.a2, -params.a1], [0.0, 0.0, 0.0]])
+    B0 = s3 * np.array([0.0, params.a3, 0.0])
+    A0 = s3[:, None] * A0 / s3[None, :]
+    ls = s3 * l
+    Ac = A0 - np.outer(ls, _C3) + np.outer(B0, Kxs)
+    return Ac, ls[:, None], Kxs[None, :], np.zeros((1, 1)), B0, np.zeros(3)
+
+
 def closed_loop_matrix(params: BoucWenParams, lambda1: float, lambda2: float, gains: Any, **kw):
     """Closed-loop state matrix (see :func:`loop_systems` for the keywords)."""
     return loop_systems(params, lambda1, lambda2, gains, lti=False, **kw).A_cl
 
 
-def _stable(A: np.ndarray, dt: float | None) -> tuple[bool, float]:
+def stability(A: np.ndarray, dt: float | None) -> tuple[bool, float]:
+    """``(stable, spectral abscissa)`` (``dt`` None) or ``(stable, spectral radius)``."""
     ev = np.linalg.eigvals(A)
     if dt is None:
         m = float(np.max(ev.real))
@@ -297,18 +311,18 @@ def _stable(A: np.ndarray, dt: float | None) -> tuple[bool, float]:
     return r < 1, r
 
 
-def _gain_interval(build, dt, *, k_hi: float = 1e4) -> tuple[float, float]:
+def gain_interval(build, dt, *, k_hi: float = 1e4) -> tuple[float, float]:
     """Loop-gain interval around 1 for which the closed loop stays stable."""
-    if not _stable(build(1.0), dt)[0]:
+    if not stability(build(1.0), dt)[0]:
         return (math.nan, math.nan)
 
     def edge(k_out: float) -> float:
         k_in = 1.0
-        if _stable(build(k_out), dt)[0]:
+        if stability(build(k_out), dt)[0]:
             return k_out
         for _ in range(60):
             mid = math.sqrt(k_in * k_out) if k_out > 0 else 0.5 * (k_in + k_out)
-            if _stable(build(mid), dt)[0]:
+            if stability(build(mid), dt)[0]:
                 k_in = mid
             else:
                 k_out = mid
@@ -320,13 +334,13 @@ def _gain_interval(build, dt, *, k_hi: float = 1e4) -> tuple[float, float]:
     grid_up = np.geomspace(1.0, k_hi, 40)[1:]
     hi = k_hi
     for k in grid_up:
-        if not _stable(build(float(k)), dt)[0]:
+        if not stability(build(float(k)), dt)[0]:
             hi = edge(float(k))
             break
     grid_dn = np.geomspace(1.0, 1e-4, 40)[1:]
     lo = 0.0
     for k in grid_dn:
-        if not _stable(build(float(k)), dt)[0]:
+        if not stability(build(float(k)), dt)[0]:
             lo = edge(float(k))
             break
     return (lo, hi)

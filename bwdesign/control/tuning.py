@@ -10,14 +10,14 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt
+from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import _as_gains, gains_for_observer
-from ..validate import Range, integer
+from ..observers.gains import as_gains, gains_for_observer
+from ..validate import NONNEGATIVE, POSITIVE, Range, integer, real
 from .analysis import LoopAnalysis, analyze_loop
-from .systems import LoopSystems, _stable, loop_systems
+from .systems import LoopSystems, loop_systems, stability
 
-__all__ = ["observer_gains", "digital_tuning", "DigitalTuning"]
+__all__ = ["observer_gains", "digital_tuning", "DigitalTuning", "MarginRequirements"]
 
 
 def observer_gains(params: BoucWenParams, poles: Any) -> np.ndarray:
@@ -201,7 +201,7 @@ def _fast_margins(sy: LoopSystems, dt: float, w: np.ndarray) -> tuple[float, flo
     are interpolated linearly on ``w``: a screen, confirmed by :func:`analyze_loop`.
     """
     A_cl, A_in = sy.A_cl, sy.A_in
-    if not _stable(A_cl, dt)[0]:
+    if not stability(A_cl, dt)[0]:
         return None
     i, j = np.unravel_index(np.argmax(np.abs(A_in)), A_in.shape)
     b = A_in[:, j]
@@ -240,6 +240,44 @@ def _fast_margins(sy: LoopSystems, dt: float, w: np.ndarray) -> tuple[float, flo
 _RADII = (0.1, 0.16, 0.25, 0.4, 0.63, 1.0, 1.6)
 
 
+@dataclass(frozen=True)
+class MarginRequirements:
+    """The worst-case margins a :func:`digital_tuning` must reach.
+
+    Parameters
+    ----------
+    gain_db : float
+        Gain margin (dB), >= 0.
+    phase_deg : float
+        Phase margin (deg), >= 0.
+    delay_samples : float
+        Delay margin in samples of ``dt``, >= 0. A zero requirement is no requirement.
+    """
+
+    gain_db: float = 6.0
+    phase_deg: float = 45.0
+    delay_samples: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name, unit in (("gain_db", "dB"), ("phase_deg", "deg"), ("delay_samples", "")):
+            value = real(getattr(self, name), f"margins.{name} {unit}".rstrip(), within=NONNEGATIVE)
+            object.__setattr__(self, name, value)
+
+    def as_dict(self, dt: float) -> dict[str, float]:
+        """``min_gain_margin_db``, ``min_phase_margin`` (deg) and ``min_delay_margin`` (s)."""
+        return {
+            "min_gain_margin_db": float(self.gain_db),
+            "min_phase_margin": float(self.phase_deg),
+            "min_delay_margin": float(self.delay_samples) * dt,
+        }
+
+
+#: Observer bandwidth times dt: the poles ``-radius/dt`` stay inside the sampled loop's reach.
+OBSERVER_RADIUS = Range(0.0, 2.0, lo_open=True, hi_open=True)
+#: Relative model error the tuning designs for.
+MISMATCH = Range(0.0, 0.5, hi_open=True)
+
+
 def digital_tuning(
     params: BoucWenParams,
     dt: float,
@@ -250,9 +288,7 @@ def digital_tuning(
     mismatch: float | None = None,
     uncertainty: UncertaintyBox | None = None,
     delay: bool = True,
-    min_gain_margin_db: float = 6.0,
-    min_phase_margin: float = 45.0,
-    min_delay_margin_samples: float = 1.0,
+    margins: MarginRequirements = MarginRequirements(),
     n_candidates: int = 9,
 ) -> DigitalTuning:
     """Choose the eq. (12) constants (and observer gains) for a loop sampled at ``dt``.
@@ -312,10 +348,9 @@ def digital_tuning(
         ``bounded=False``; ``ParameterError`` otherwise).
     delay : bool
         Include a one-sample computation delay (delay-compensated law).
-    min_gain_margin_db, min_phase_margin : float
-        Requirements (dB, deg).
-    min_delay_margin_samples : float
-        Required delay margin in samples.
+    margins : MarginRequirements
+        The worst-case gain, phase and delay margins required (default 6 dB, 45 deg,
+        one sample).
     n_candidates : int
         Number of lambda values scanned per observer bandwidth.
 
@@ -323,21 +358,85 @@ def digital_tuning(
     -------
     DigitalTuning
     """
-    dt = _check_dt(dt)
-    if observer_radius is not None and not 0 < observer_radius < 2:
-        raise InputError(f"observer_radius must be in (0, 2), got {observer_radius}")
+    dt = check_dt(dt)
+    if observer_radius is not None:
+        observer_radius = real(observer_radius, "observer_radius", within=OBSERVER_RADIUS)
+    mismatch = _checked_mismatch(mismatch, uncertainty)
+    if integral_ratio is not None:
+        integral_ratio = real(integral_ratio, "integral_ratio", within=POSITIVE)
+    if not isinstance(margins, MarginRequirements):
+        raise InputError(f"margins must be a MarginRequirements, got {margins!r}")
+    n_candidates = integer(n_candidates, "n_candidates", within=Range(1, 10_000))
+    observers = _observers(params, dt, gains, observer_radius)
+    truths, checked = _mismatch_plants(params, mismatch, uncertainty)
+    req = margins.as_dict(dt)
+    law = _Law(dt, integral_ratio, delay)
+    # 1. screen every (observer, lambda) from the frequency response
+    cands = _screen(params, law, observers, truths, req, n_candidates)
+    # 2. confirm the best few with the exact analysis (eigenvalue gain interval,
+    #    python-control phase margin); the reported numbers are these
+    row, nominal = _confirm_best(params, law, cands, truths, req)
+    met = bool(row["stable"] and row["score"] >= 1.0)
+    designed = (gains is None, observer_radius is None)
+    scanned = (len(cands), n_candidates, _corners_text(checked, len(truths) - 1))
+    return DigitalTuning(
+        lambda1=row["lambda"],
+        lambda2=row["lambda"],
+        integral_rate=row["integral_rate"],
+        gains=tuple(float(v) for v in row["gains"]),
+        observer_bandwidth=float(row["observer_bandwidth"]),
+        dt=dt,
+        form="discrete",
+        delay=bool(delay),
+        mismatch=checked,
+        nominal=nominal,
+        worst_gain_margin_db=row["worst_gain_margin_db"],
+        worst_phase_margin=row["worst_phase_margin_deg"],
+        worst_delay_margin=row["worst_delay_margin_s"],
+        requirements=req,
+        met=met,
+        candidates=cands,
+        reasoning=_reasoning(params, law, row, designed, margins, scanned, met),
+    )
+
+
+def _checked_mismatch(mismatch: float | None, uncertainty: UncertaintyBox | None) -> float:
+    """The relative a1, a3 error to tune against (0 with a box, whose corners are used)."""
     if uncertainty is not None and mismatch is not None:
         raise InputError("give mismatch or uncertainty, not both")
     if uncertainty is not None and not isinstance(uncertainty, UncertaintyBox):
         raise InputError(f"uncertainty must be an UncertaintyBox, got {uncertainty!r}")
     if mismatch is None:
         mismatch = 0.0 if uncertainty is not None else 0.02
-    if not 0 <= mismatch < 0.5:
-        raise InputError(f"mismatch must be a relative error in [0, 0.5), got {mismatch}")
-    if integral_ratio is not None and not integral_ratio > 0:
-        raise InputError(f"integral_ratio must be > 0 or None, got {integral_ratio}")
-    n_candidates = integer(n_candidates, "n_candidates", within=Range(1, 10_000))
-    # observers to try: (omega_o, gains)
+    return real(mismatch, "mismatch (relative error)", within=MISMATCH)
+
+
+@dataclass(frozen=True)
+class _Law:
+    """The discrete eq. (12) law every candidate runs, but for its ``lambda``."""
+
+    dt: float
+    integral_ratio: float | None
+    delay: bool
+
+    def kw(self, lam: float) -> dict:
+        ir = None if self.integral_ratio is None else self.integral_ratio * lam
+        return dict(dt=self.dt, form="discrete", integral_rate=ir, delay=self.delay)
+
+
+def _score(req: dict[str, float], gm: float, pm: float, dm: float) -> float:
+    """The robustness score ``min(GM/GM_req, PM/PM_req, DM/DM_req)`` (a zero requirement: inf)."""
+    return min(
+        gm / req["min_gain_margin_db"] if req["min_gain_margin_db"] > 0 else math.inf,
+        pm / req["min_phase_margin"] if req["min_phase_margin"] > 0 else math.inf,
+        dm / req["min_delay_margin"] if req["min_delay_margin"] > 0 else math.inf,
+    )
+
+
+def _observers(
+    params: BoucWenParams, dt: float, gains: Any, observer_radius: float | None
+) -> list[tuple[float, np.ndarray]]:
+    """The observers to try: ``(omega_o, gains)``, designed or the given gains."""
     if gains is None:
         radii = _RADII if observer_radius is None else (float(observer_radius),)
         observers = []
@@ -347,38 +446,31 @@ def digital_tuning(
                 observers.append((om, observer_gains(params, [-om] * 3)))
             except InputError:  # pragma: no cover - a triple real pole is always valid
                 continue
-    else:
-        l = _as_gains(gains)
-        ev = np.linalg.eigvals(
-            np.array(
-                [
-                    [-l[0], 1.0, 0.0],
-                    [-(params.a1 + l[1]), -params.a2, -params.a1],
-                    [-l[2], 0.0, 0.0],
-                ]
-            )
+        return observers
+    l = as_gains(gains)
+    ev = np.linalg.eigvals(
+        np.array(
+            [
+                [-l[0], 1.0, 0.0],
+                [-(params.a1 + l[1]), -params.a2, -params.a1],
+                [-l[2], 0.0, 0.0],
+            ]
         )
-        observers = [(float(np.min(np.abs(ev))), l)]
-    truths, checked = _mismatch_plants(params, mismatch, uncertainty)
-    req = {
-        "min_gain_margin_db": float(min_gain_margin_db),
-        "min_phase_margin": float(min_phase_margin),
-        "min_delay_margin": float(min_delay_margin_samples) * dt,
-    }
+    )
+    return [(float(np.min(np.abs(ev))), l)]
 
-    def score_of(gm: float, pm: float, dm: float) -> float:
-        return min(
-            gm / req["min_gain_margin_db"] if req["min_gain_margin_db"] > 0 else math.inf,
-            pm / req["min_phase_margin"] if req["min_phase_margin"] > 0 else math.inf,
-            dm / req["min_delay_margin"] if req["min_delay_margin"] > 0 else math.inf,
-        )
 
-    def kw(lam: float) -> dict:
-        ir = None if integral_ratio is None else integral_ratio * lam
-        return dict(dt=dt, form="discrete", integral_rate=ir, delay=delay)
-
-    # 1. screen every (observer, lambda) from the frequency response
-    cands = []
+def _screen(
+    params: BoucWenParams,
+    law: _Law,
+    observers: list[tuple[float, np.ndarray]],
+    truths: list[BoucWenParams | None],
+    req: dict[str, float],
+    n_candidates: int,
+) -> list[dict[str, Any]]:
+    """Every (observer, lambda) with its worst-case margins screened from the frequency response."""
+    dt = law.dt
+    cands: list[dict[str, Any]] = []
     for om, l in observers:
         w = np.geomspace(om / 1e4, math.pi / dt, 500)
         for lam in np.geomspace(om / 100.0, om / 2.0, int(n_candidates)):
@@ -388,7 +480,7 @@ def digital_tuning(
             pruned = False
             for tp in truths:
                 try:
-                    sy = loop_systems(params, lam, lam, l, true_params=tp, lti=False, **kw(lam))
+                    sy = loop_systems(params, lam, lam, l, true_params=tp, lti=False, **law.kw(lam))
                     m = _fast_margins(sy, dt, w)
                 except (InputError, np.linalg.LinAlgError, ValueError):
                     m = None
@@ -396,7 +488,7 @@ def digital_tuning(
                     stable = False
                     break
                 worst = [min(a, b) for a, b in zip(worst, m, strict=True)]
-                sc = score_of(*worst)
+                sc = _score(req, *worst)
                 if cands and sc < 1.0 and sc < max(c["score"] for c in cands) - 0.5:
                     pruned = True  # the worst case can only fall further: not a contender
                     break
@@ -405,68 +497,99 @@ def digital_tuning(
                     "observer_bandwidth": float(om),
                     "gains": tuple(float(v) for v in l),
                     "lambda": lam,
-                    "integral_rate": kw(lam)["integral_rate"],
+                    "integral_rate": law.kw(lam)["integral_rate"],
                     "stable": stable,
                     "worst_gain_margin_db": worst[0] if stable else -math.inf,
                     "worst_phase_margin_deg": worst[1] if stable else -math.inf,
                     "worst_delay_margin_s": worst[2] if stable else -math.inf,
-                    "score": score_of(*worst) if stable else -math.inf,
+                    "score": _score(req, *worst) if stable else -math.inf,
                     "verified": False,
                     "pruned": pruned,
                 }
             )
+    return cands
 
-    # 2. confirm the best few with the exact analysis (eigenvalue gain interval,
-    #    python-control phase margin); the reported numbers are these
-    def verify(c: dict) -> LoopAnalysis:
-        worst = [math.inf, math.inf, math.inf]
-        stable = True
-        nominal = None
-        lam = c["lambda"]
-        for tp in truths:
-            a = analyze_loop(params, lam, lam, c["gains"], true_params=tp, **kw(lam))
-            if nominal is None:
-                nominal = a
-            stable &= a.stable
-            pm = a.phase_margin if math.isfinite(a.phase_margin) else math.inf
-            dm = a.delay_margin if math.isfinite(a.delay_margin) else math.inf
-            m = (a.gain_margin_db, pm, dm) if a.stable else (-math.inf,) * 3
-            worst = [min(x, y) for x, y in zip(worst, m, strict=True)]
-        c.update(
-            stable=stable,
-            worst_gain_margin_db=worst[0],
-            worst_phase_margin_deg=worst[1],
-            worst_delay_margin_s=worst[2],
-            score=score_of(*worst) if stable else -math.inf,
-            verified=True,
-        )
-        return nominal
 
-    def rank(c: dict) -> tuple[bool, float, float]:
-        # candidates meeting the requirements first; among them the slowest
-        # observer (it passes the least sensor noise), then the most robust
-        meets = c["stable"] and c["score"] >= 1.0
-        return (meets, -c["observer_bandwidth"] if meets else 0.0, c["score"])
+def _verify(
+    params: BoucWenParams,
+    law: _Law,
+    c: dict[str, Any],
+    truths: list[BoucWenParams | None],
+    req: dict[str, float],
+) -> LoopAnalysis:
+    """Confirm candidate ``c`` with :func:`analyze_loop` (updates ``c``); its nominal analysis."""
+    worst = [math.inf, math.inf, math.inf]
+    stable = True
+    nominal = None
+    lam = c["lambda"]
+    for tp in truths:
+        a = analyze_loop(params, lam, lam, c["gains"], true_params=tp, **law.kw(lam))
+        if nominal is None:
+            nominal = a
+        stable &= a.stable
+        pm = a.phase_margin if math.isfinite(a.phase_margin) else math.inf
+        dm = a.delay_margin if math.isfinite(a.delay_margin) else math.inf
+        m = (a.gain_margin_db, pm, dm) if a.stable else (-math.inf,) * 3
+        worst = [min(x, y) for x, y in zip(worst, m, strict=True)]
+    c.update(
+        stable=stable,
+        worst_gain_margin_db=worst[0],
+        worst_phase_margin_deg=worst[1],
+        worst_delay_margin_s=worst[2],
+        score=_score(req, *worst) if stable else -math.inf,
+        verified=True,
+    )
+    return nominal
 
-    order = sorted(range(len(cands)), key=lambda i: rank(cands[i]), reverse=True)
+
+def _confirm_best(
+    params: BoucWenParams,
+    law: _Law,
+    cands: list[dict[str, Any]],
+    truths: list[BoucWenParams | None],
+    req: dict[str, float],
+) -> tuple[dict[str, Any], LoopAnalysis]:
+    """The best of the three best-screened candidates after :func:`_verify`, with its analysis."""
+    order = sorted(range(len(cands)), key=lambda i: _rank(cands[i]), reverse=True)
     best = None
     for i in order[:3]:
-        nominal = verify(cands[i])
-        if best is None or rank(cands[i]) > rank(best[0]):
+        nominal = _verify(params, law, cands[i], truths, req)
+        if best is None or _rank(cands[i]) > _rank(best[0]):
             best = (cands[i], nominal)
-    row, nominal = best
-    met = bool(row["stable"] and row["score"] >= 1.0)
-    lam = row["lambda"]
-    omega_o = row["observer_bandwidth"]
-    l = row["gains"]
-    if gains is None:
+    return best
+
+
+def _rank(c: dict) -> tuple[bool, float, float]:
+    # candidates meeting the requirements first; among them the slowest
+    # observer (it passes the least sensor noise), then the most robust
+    meets = c["stable"] and c["score"] >= 1.0
+    return (meets, -c["observer_bandwidth"] if meets else 0.0, c["score"])
+
+
+def _reasoning(
+    params: BoucWenParams,
+    law: _Law,
+    row: dict[str, Any],
+    designed: tuple[bool, bool],
+    margins: MarginRequirements,
+    scanned: tuple[int, int, str],
+    met: bool,
+) -> str:
+    """How the tuning was chosen, in words.
+
+    ``designed``: (the observer was designed, its radius searched); ``scanned``: (number of
+    candidates, lambda values per observer, the corners checked).
+    """
+    dt, lam, omega_o, l = law.dt, row["lambda"], row["observer_bandwidth"], row["gains"]
+    n_screened, n_candidates, corners = scanned
+    if designed[0]:
         r = omega_o * dt
         obs_note = (
             f"observer: triple pole at {omega_o:.4g} rad/s (discrete radius exp(-{r:.3g}) = "
             f"{math.exp(-r):.3f} at dt = {dt:g} s"
             + (
                 f", omega_o dt searched over {', '.join(f'{v:g}' for v in _RADII)}"
-                if observer_radius is None
+                if designed[1]
                 else ""
             )
             + f"; plant resonance sqrt(a1) = {math.sqrt(params.a1):.4g} rad/s), "
@@ -474,7 +597,6 @@ def digital_tuning(
         )
     else:
         obs_note = f"observer: the given gains l = ({l[0]:g}, {l[1]:g}, {l[2]:g})"
-    n_screened = len(cands)
     if met:
         verdict = "requirements met"
     else:
@@ -489,51 +611,29 @@ def digital_tuning(
                 f"resonance sqrt(a1) dt = {math.sqrt(params.a1) * dt:.2g} rad per sample, "
                 f"Nyquist is pi); {verdict}"
             )
-    reasoning = "; ".join(
+    ratio = law.integral_ratio
+    return "; ".join(
         [
             obs_note,
             "law: discrete form of eq. (12) (error poles placed at exp(-lambda dt) on the exact "
             "ZOH model, feedforward at mid-sample)"
-            + (
-                ""
-                if integral_ratio is None
-                else f" with integral action at {integral_ratio:g} lambda"
-            ),
+            + ("" if ratio is None else f" with integral action at {ratio:g} lambda"),
             f"lambda = lambda1 = lambda2 scanned over {int(n_candidates)} values in "
             f"[omega_o/100, omega_o/2] for each observer bandwidth ({n_screened} candidates, "
             "screened from the frequency response, the best 3 confirmed by the exact analysis)",
-            f"each checked at nominal and at {_corners_text(checked, len(truths) - 1)}"
-            + (" with a one-sample computation delay" if delay else ""),
+            f"each checked at nominal and at {corners}"
+            + (" with a one-sample computation delay" if law.delay else ""),
             (
                 "chosen: the slowest observer (least sensor noise) with a candidate meeting "
                 "the requirements, and its lambda with the best worst-case score"
                 if met
                 else "chosen: the largest worst-case score"
             )
-            + f" min(GM/{min_gain_margin_db:g} dB, PM/{min_phase_margin:g} deg, DM/"
-            f"{min_delay_margin_samples:g} sample), lambda = {lam:.4g} 1/s: "
+            + f" min(GM/{margins.gain_db:g} dB, PM/{margins.phase_deg:g} deg, DM/"
+            f"{margins.delay_samples:g} sample), lambda = {lam:.4g} 1/s: "
             f"GM {row['worst_gain_margin_db']:.3g} dB, "
             f"PM {row['worst_phase_margin_deg']:.3g} deg, delay margin "
             f"{row['worst_delay_margin_s'] / dt:.3g} samples (worst case)",
             verdict,
         ]
-    )
-    return DigitalTuning(
-        lambda1=lam,
-        lambda2=lam,
-        integral_rate=row["integral_rate"],
-        gains=tuple(float(v) for v in l),
-        observer_bandwidth=float(omega_o),
-        dt=dt,
-        form="discrete",
-        delay=bool(delay),
-        mismatch=checked,
-        nominal=nominal,
-        worst_gain_margin_db=row["worst_gain_margin_db"],
-        worst_phase_margin=row["worst_phase_margin_deg"],
-        worst_delay_margin=row["worst_delay_margin_s"],
-        requirements=req,
-        met=met,
-        candidates=cands,
-        reasoning=reasoning,
     )

@@ -29,7 +29,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import simulate_zoh
+from ..model.plant import check_dt, simulate_zoh
+from ..validate import POSITIVE, SIGNAL, UDOT_MAX, real
 from .data import IdentificationData
 
 __all__ = ["design_excitation", "smallest_rate", "simulate_record", "KINDS", "RANGE_MARGIN"]
@@ -43,19 +44,13 @@ MIN_SWEEPS = 1.0
 
 
 def _check(umin: float, umax: float, udot_max: float, duration: float, dt: float) -> int:
-    for name, v in (
-        ("umin", umin),
-        ("umax", umax),
-        ("udot_max", udot_max),
-        ("duration", duration),
-        ("dt", dt),
-    ):
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            raise InputError(f"{name} must be a finite number, got {v!r}")
+    umin = real(umin, "umin (V)", within=SIGNAL)
+    umax = real(umax, "umax (V)", within=SIGNAL)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+    duration = real(duration, "duration (s)", within=POSITIVE)
+    dt = check_dt(dt)
     if umin >= umax:
         raise InputError(f"umin ({umin:g} V) must be below umax ({umax:g} V)")
-    if udot_max <= 0 or duration <= 0 or dt <= 0:
-        raise InputError("udot_max, duration and dt must be > 0")
     n = int(round(duration / dt))
     if n < 200:
         raise InputError(f"duration/dt = {n} samples; an identification record needs >= 200")

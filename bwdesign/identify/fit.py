@@ -34,15 +34,33 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
+from ..validate import Range, integer
 from .data import IdentificationData
-from .problem import IA, IB, IE1, IE2, IK, IOFF, IQ, ITAU, IW, IZ, Q_MAX, Problem, theta_from_params
-from .result import IdentificationResult, build_result
+from .problem import (
+    IA,
+    IB,
+    IE1,
+    IE2,
+    IK,
+    IOFF,
+    IQ,
+    ITAU,
+    IW,
+    IZ,
+    Q_MAX,
+    Problem,
+    delayed_input,
+    theta_from_params,
+)
+from .result import FitOutcome, IdentificationResult, build_result
 
 __all__ = ["identify", "NAMES"]
 
@@ -50,6 +68,8 @@ NAMES = ("a1", "a2", "a3", "alpha", "beta", "gamma")
 #: A coordinate is "determined" when its 95 % half-width is below this fraction.
 DETERMINED_REL = 0.5
 _DELAYS = (0, 1, 2, 3)
+#: Supported number of refinements of the fit (the derived start counts as one).
+MULTISTART = Range(1, math.inf)
 #: Least share of the input's power within a third and three times the fitted
 #: resonance for the resonance to count as seen (besides a tight interval).
 MIN_BAND_FRACTION = 1e-5
@@ -59,12 +79,6 @@ _PROFILE_FACTORS = (0.5, 2.0, 4.0, 8.0, 16.0, 32.0)
 _CHI2_95 = 3.84
 #: chi-square(1) quantile at 0.999: the misfit drop a delay must buy.
 _LR_DELAY = 10.83
-
-
-def _delayed(u: np.ndarray, d: int) -> np.ndarray:
-    if d == 0:
-        return u
-    return np.concatenate((np.full(d, u[0]), u[:-d]))
 
 
 def _resolve_init(init: str | BoucWenParams | None) -> BoucWenParams | None:
@@ -298,8 +312,7 @@ def identify(
             f"validation record is sampled at {validation.dt:.6g} s, the training record at "
             f"{data.dt:.6g} s: they must share the sample time"
         )
-    if isinstance(multistart, bool) or not isinstance(multistart, int) or multistart < 1:
-        raise InputError(f"multistart must be an integer >= 1, got {multistart!r}")
+    multistart = integer(multistart, "multistart", within=MULTISTART)
     tic = time.perf_counter()
     prior = _resolve_init(init)
     free = _free_mask(fixed, prior)
@@ -310,77 +323,105 @@ def identify(
     theta, sol, nfev = _multistart(
         prob, start, free, multistart=multistart, seed=seed, max_nfev=max_nfev, say=say
     )
-    delay = 0
-    for d in _DELAYS[1:]:
-        # a delay must earn its place: a likelihood-ratio gain above chi2(1, 0.999)
-        trial = Problem(_delayed(data.u, d), data.y, data.dt, sign)
-        th_d, sol_d = _refine(trial, theta, free, max_nfev)
-        nfev += sol_d.nfev
-        if not data.n * math.log(sol.cost / max(sol_d.cost, 1e-300)) > _LR_DELAY:
-            break
-        say(f"  input delay {d} sample(s): cost {2 * sol_d.cost:.6g}")
-        delay, theta, sol, prob = d, th_d, sol_d, trial
-    resonance_held = None
-    alternatives: list[np.ndarray] = []
-    if free[IW]:
-        rel = _rel_halfwidth(prob, theta, free, IW)
-        f_r = math.exp(theta[IW]) / (2 * math.pi)
-        band = _band_fraction(data.u, data.dt, f_r / 3.0, 3.0 * f_r)
-        say(f"  resonance {f_r:.4g} Hz: input power within [f/3, 3f]: {band:.3g} of the total")
-        if not (rel < DETERMINED_REL and band >= MIN_BAND_FRACTION):
-            tau = math.exp(theta[ITAU])
-            if prior is not None:
-                src, wn_hold = "init", math.sqrt(prior.a1)
-            elif rel < DETERMINED_REL and f_r < 0.5 / data.dt:
-                # the low-frequency curvature placed it inside the record's band: a
-                # guess worth keeping, but not a determination
-                src, wn_hold = "curvature", math.exp(theta[IW])
-            else:
-                src, wn_hold = "default", max(math.pi / data.dt, 2.0 / tau)
-            resonance_held = (src, wn_hold, rel, band)
-            say(
-                f"  the resonance is not determined by these data (95 % half-width "
-                f"{100 * rel:.3g} % of sqrt(a1)); holding it at {wn_hold / (2 * math.pi):.4g} Hz"
-            )
-            if src != "curvature":  # else keep the free fit (and its wider intervals)
-                free = free.copy()
-                free[IW] = False
-                theta = theta.copy()
-                theta[IW] = math.log(wn_hold)
-                theta, sol = _refine(prob, theta, free, max_nfev)
-                nfev += sol.nfev
-            # profile: other resonances that fit the record as well widen the intervals
-            held = free.copy()
-            held[IW] = False
-            s2 = 2.0 * sol.cost / max(1, data.n - int(held.sum()))
-            for factor in _PROFILE_FACTORS:
-                th_k = theta.copy()
-                th_k[IW] += math.log(factor)
-                th_k, sol_k = _refine(prob, th_k, held, max_nfev)
-                nfev += sol_k.nfev
-                if 2.0 * (sol_k.cost - sol.cost) <= _CHI2_95 * s2:
-                    alternatives.append(th_k)
-            say(f"  {len(alternatives)} other resonance(s) fit as well: intervals widened")
+    fit = _Fit(prob, theta, sol, free, nfev)
+    delay = _search_delay(fit, data, max_nfev, say)
+    resonance_held, alternatives = None, []
+    if fit.free[IW]:
+        resonance_held, alternatives = _resonance(fit, data, prior, max_nfev, say)
     # intervals with the resonance free even when it is held: they must not pretend
     # that a resonance the record cannot see is known
-    cov_free = free.copy()
+    cov_free = fit.free.copy()
     cov_free[IW] = cov_free[IW] or resonance_held is not None
-    return build_result(
-        prob,
-        theta,
-        cov_free,
-        sol,
-        data=data,
-        validation=validation,
+    outcome = FitOutcome(
+        theta=fit.theta,
+        free=cov_free,
+        sol=fit.sol,
         delay=delay,
         resonance_held=resonance_held,
         alternatives=alternatives,
-        name=name,
-        nfev=nfev,
+        nfev=fit.nfev,
         n_starts=multistart,
         seconds=time.perf_counter() - tic,
-        delayed=_delayed,
     )
+    return build_result(fit.prob, outcome, data=data, validation=validation, name=name)
+
+
+@dataclass
+class _Fit:
+    """The search so far: the problem (input delay), the optimum, what is free, the cost."""
+
+    prob: Problem
+    theta: np.ndarray
+    sol: Any
+    free: np.ndarray
+    nfev: int
+
+
+def _search_delay(fit: _Fit, data: IdentificationData, max_nfev: int, say) -> int:
+    """The input delay (samples) that earns its place; ``fit`` moves to it."""
+    delay = 0
+    for d in _DELAYS[1:]:
+        # a delay must earn its place: a likelihood-ratio gain above chi2(1, 0.999)
+        trial = Problem(delayed_input(data.u, d), data.y, data.dt, fit.prob.sign)
+        th_d, sol_d = _refine(trial, fit.theta, fit.free, max_nfev)
+        fit.nfev += sol_d.nfev
+        if not data.n * math.log(fit.sol.cost / max(sol_d.cost, 1e-300)) > _LR_DELAY:
+            break
+        say(f"  input delay {d} sample(s): cost {2 * sol_d.cost:.6g}")
+        delay, fit.theta, fit.sol, fit.prob = d, th_d, sol_d, trial
+    return delay
+
+
+def _resonance(
+    fit: _Fit, data: IdentificationData, prior: BoucWenParams | None, max_nfev: int, say
+) -> tuple[tuple[str, float, float, float] | None, list[np.ndarray]]:
+    """Whether the record determines the resonance; if not, hold it and profile it.
+
+    Returns ``(resonance_held, alternatives)``: ``(source, wn, rel, band)`` of a held
+    resonance (``fit`` refitted with it held unless the record's own curvature placed
+    it) and the other resonances that fit the record as well (they widen the intervals).
+    """
+    theta, prob = fit.theta, fit.prob
+    alternatives: list[np.ndarray] = []
+    rel = _rel_halfwidth(prob, theta, fit.free, IW)
+    f_r = math.exp(theta[IW]) / (2 * math.pi)
+    band = _band_fraction(data.u, data.dt, f_r / 3.0, 3.0 * f_r)
+    say(f"  resonance {f_r:.4g} Hz: input power within [f/3, 3f]: {band:.3g} of the total")
+    if rel < DETERMINED_REL and band >= MIN_BAND_FRACTION:
+        return None, alternatives
+    tau = math.exp(theta[ITAU])
+    if prior is not None:
+        src, wn_hold = "init", math.sqrt(prior.a1)
+    elif rel < DETERMINED_REL and f_r < 0.5 / data.dt:
+        # the low-frequency curvature placed it inside the record's band: a
+        # guess worth keeping, but not a determination
+        src, wn_hold = "curvature", math.exp(theta[IW])
+    else:
+        src, wn_hold = "default", max(math.pi / data.dt, 2.0 / tau)
+    say(
+        f"  the resonance is not determined by these data (95 % half-width "
+        f"{100 * rel:.3g} % of sqrt(a1)); holding it at {wn_hold / (2 * math.pi):.4g} Hz"
+    )
+    if src != "curvature":  # else keep the free fit (and its wider intervals)
+        fit.free = fit.free.copy()
+        fit.free[IW] = False
+        theta = theta.copy()
+        theta[IW] = math.log(wn_hold)
+        fit.theta, fit.sol = _refine(prob, theta, fit.free, max_nfev)
+        fit.nfev += fit.sol.nfev
+    # profile: other resonances that fit the record as well widen the intervals
+    held = fit.free.copy()
+    held[IW] = False
+    s2 = 2.0 * fit.sol.cost / max(1, data.n - int(held.sum()))
+    for factor in _PROFILE_FACTORS:
+        th_k = fit.theta.copy()
+        th_k[IW] += math.log(factor)
+        th_k, sol_k = _refine(prob, th_k, held, max_nfev)
+        fit.nfev += sol_k.nfev
+        if 2.0 * (sol_k.cost - fit.sol.cost) <= _CHI2_95 * s2:
+            alternatives.append(th_k)
+    say(f"  {len(alternatives)} other resonance(s) fit as well: intervals widened")
+    return (src, wn_hold, rel, band), alternatives
 
 
 def _band_fraction(u: np.ndarray, dt: float, f_lo: float, f_hi: float) -> float:

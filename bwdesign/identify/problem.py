@@ -91,6 +91,13 @@ def theta_from_params(p: BoucWenParams) -> tuple[np.ndarray, float]:
     return th, math.copysign(1.0, p.a3)
 
 
+def delayed_input(u: np.ndarray, d: int) -> np.ndarray:
+    """The held input delayed by ``d`` samples (the first value held before the record)."""
+    if d == 0:
+        return u
+    return np.concatenate((np.full(d, u[0]), u[:-d]))
+
+
 class Problem:
     """Residuals and Jacobian of one record for a fixed input delay.
 

@@ -27,7 +27,22 @@ from scipy.optimize import least_squares
 
 from ..model.params import BoucWenParams
 from ..model.uncertainty import UncertaintyBox
-from .problem import IA, IB, IE1, IE2, IK, IOFF, IQ, ITAU, IW, IZ, Q_MAX, Problem, params_from_theta
+from .problem import (
+    IA,
+    IB,
+    IE1,
+    IE2,
+    IK,
+    IOFF,
+    IQ,
+    ITAU,
+    IW,
+    IZ,
+    Q_MAX,
+    Problem,
+    delayed_input,
+    params_from_theta,
+)
 
 __all__ = ["IdentificationResult", "fit_percent"]
 
@@ -377,26 +392,144 @@ def _validate(prob: Problem, theta: np.ndarray) -> tuple[np.ndarray, float]:
     return pred, fit_percent(prob.y, pred)
 
 
+@dataclass(frozen=True)
+class FitOutcome:
+    """Where the search of :func:`bwdesign.identify.identify` ended, and how it got there.
+
+    Attributes
+    ----------
+    theta : ndarray
+        The optimum (fit coordinates, :mod:`bwdesign.identify.problem`).
+    free : ndarray of bool
+        Coordinates whose uncertainty is reported (the resonance free even when held).
+    sol : scipy.optimize.OptimizeResult
+        The optimiser's answer at ``theta``.
+    delay : int
+        Input delay (samples).
+    resonance_held : (source, wn, rel, band) or None
+        A resonance the record does not determine, held at ``wn`` (rad/s).
+    alternatives : list of ndarray
+        Other resonances that fit the record as well (they widen the intervals).
+    nfev, n_starts : int
+        Residual evaluations and refinements spent.
+    seconds : float
+        Wall time of the search.
+    """
+
+    theta: np.ndarray
+    free: np.ndarray
+    sol: Any
+    delay: int
+    resonance_held: tuple[str, float, float, float] | None
+    alternatives: list[np.ndarray]
+    nfev: int
+    n_starts: int
+    seconds: float
+
+
 def build_result(
-    prob: Problem,
-    theta: np.ndarray,
-    free: np.ndarray,
-    sol: Any,
-    *,
-    data: Any,
-    validation: Any,
-    delay: int,
-    resonance_held: tuple[str, float, float, float] | None,
-    alternatives: list[np.ndarray],
-    name: str,
-    nfev: int,
-    n_starts: int,
-    seconds: float,
-    delayed: Any,
+    prob: Problem, fit: FitOutcome, *, data: Any, validation: Any, name: str
 ) -> IdentificationResult:
-    """Covariance, intervals, fit quality and diagnostics at the optimum ``theta``."""
+    """Covariance, intervals, fit quality and diagnostics at the optimum ``fit.theta``."""
+    theta, sol, delay = fit.theta, fit.sol, fit.delay
     p = params_from_theta(theta, prob.sign, name)
     r = prob.residual(theta)
+    alt = [params_from_theta(th, prob.sign) for th in fit.alternatives]
+    unc = _uncertainty(prob, fit, p, r, alt)
+    y_model = prob.predict(theta)
+    res_um = y_model - prob.y
+    fit_train = fit_percent(prob.y, y_model)
+    rc = r - r.mean()
+    energy = float(rc @ rc)
+    lags = range(1, min(51, rc.size))
+    acf = np.array([rc[k:] @ rc[:-k] for k in lags]) / energy if energy > 0 else np.zeros(1)
+    whiteness = (float(acf[0]), float(np.mean(np.abs(acf) > 2.0 / math.sqrt(rc.size))))
+    traces = {"t": data.t, "u": data.u, "y": data.y, "y_model": y_model}
+    fit_val = rms_val = None
+    if validation is not None:
+        vprob = Problem(delayed_input(validation.u, delay), validation.y, validation.dt, prob.sign)
+        v_model, fit_val = _validate(vprob, theta)
+        rms_val = float(np.sqrt(np.mean((v_model - validation.y) ** 2)))
+        traces.update(
+            {
+                "val_t": validation.t,
+                "val_u": validation.u,
+                "val_y": validation.y,
+                "val_y_model": v_model,
+            }
+        )
+    notes = _diagnose(
+        p=p,
+        u=data.u,
+        dt=data.dt,
+        rel=unc.rel,
+        corr=unc.corr,
+        derived=unc.derived,
+        resonance_held=fit.resonance_held,
+        delay=delay,
+        theta=theta,
+        r_acf1=whiteness,
+        fit_train=fit_train,
+    )
+    if fit.alternatives:
+        notes.append(_widened_note(alt, unc.widened))
+    converged, reason = _convergence(sol, unc.values)
+    wn = math.sqrt(p.a1)
+    h0 = float(theta[IZ] * p.alpha / (p.beta + p.gamma))
+    w0 = p.static_gain * float(prob.u[0]) - h0
+    x0 = (w0 + prob.y_scale * float(theta[IE1]), prob.y_scale * wn * float(theta[IE2]), h0)
+    return IdentificationResult(
+        params=p,
+        std_err=unc.se,
+        ci95=unc.ci,
+        correlation=unc.corr,
+        determined=unc.determined,
+        derived=unc.derived,
+        fit_percent={"train": fit_train, "validation": fit_val},
+        residual_rms=float(np.sqrt(np.mean(res_um**2))),
+        residual_rms_validation=rms_val,
+        offset=prob.y_mean + prob.y_scale * float(theta[IOFF]),
+        offset_std_err=prob.y_scale * float(unc.sd[IOFF]),
+        initial_state=x0,
+        delay_samples=delay,
+        dt=data.dt,
+        n_samples=data.n,
+        diagnostics=tuple(notes),
+        converged=converged,
+        reason=reason,
+        covariance_method=(
+            f"Newey-West sandwich (Bartlett weights, lag {unc.lag} samples) on the Jacobian at "
+            "the optimum, each variance at least the white-noise s^2 (J^T J)^-1; delta "
+            "method to a1..gamma"
+        ),
+        nfev=fit.nfev,
+        n_starts=fit.n_starts,
+        seconds=fit.seconds,
+        traces=traces,
+    )
+
+
+@dataclass(frozen=True)
+class _Uncertainty:
+    """Standard errors, intervals and correlations of the six parameters and derived values."""
+
+    values: dict[str, float]
+    se: dict[str, float]
+    rel: dict[str, float]
+    ci: dict[str, tuple[float, float]]
+    determined: dict[str, bool]
+    corr: np.ndarray
+    derived: dict[str, dict[str, float]]
+    widened: list[str]
+    sd: np.ndarray
+    lag: int
+
+
+def _uncertainty(
+    prob: Problem, fit: FitOutcome, p: BoucWenParams, r: np.ndarray, alt: list[BoucWenParams]
+) -> _Uncertainty:
+    """The covariance at the optimum, mapped to a1..gamma and widened by the alternatives."""
+    theta, free = fit.theta, fit.free
     jac = prob.jacobian(theta, free, central=True)
     cov_free, lag = _covariance(jac, r)
     cov = np.zeros((10, 10))
@@ -410,7 +543,7 @@ def build_result(
     inf6 = (np.abs(tn[:, bad]) > 0).any(axis=1)
     var = np.where(inf6 | ~np.isfinite(var), math.inf, var)
     se = {n: float(math.sqrt(v)) for n, v in zip(NAMES, var, strict=True)}
-    if resonance_held is not None:
+    if fit.resonance_held is not None:
         for n in ("a1", "a2", "a3"):
             se[n] = math.inf
     values = {n: float(getattr(p, n)) for n in NAMES}
@@ -426,7 +559,6 @@ def build_result(
             corr[i, :] = np.nan
             corr[:, i] = np.nan
     widened = []
-    alt = [params_from_theta(th, prob.sign) for th in alternatives]
     for n in NAMES:
         spread = max((abs(getattr(q, n) - values[n]) for q in alt), default=0.0)
         if math.isfinite(se[n]) and spread > Z95 * se[n]:
@@ -435,14 +567,20 @@ def build_result(
             widened.append(n)
     ci = {n: (values[n] - Z95 * se[n], values[n] + Z95 * se[n]) for n in NAMES}
     determined = {n: bool(rel[n] < _DETERMINED_REL) for n in NAMES}
+    sd = np.sqrt(np.clip(np.where(np.isfinite(np.diag(cov)), np.diag(cov), np.inf), 0.0, None))
+    derived = _derived(p, cov, sd, alt, held=fit.resonance_held is not None)
+    return _Uncertainty(values, se, rel, ci, determined, corr, derived, widened, sd, lag)
 
+
+def _derived(
+    p: BoucWenParams, cov: np.ndarray, sd: np.ndarray, alt: list[BoucWenParams], *, held: bool
+) -> dict[str, dict[str, float]]:
+    """Static gain, lag, natural frequency and damping ratio with their standard errors."""
     k = p.static_gain
     tau = p.a2 / p.a1
     wn = math.sqrt(p.a1)
     zeta = 0.5 * tau * wn
-    sd = np.sqrt(np.clip(np.where(np.isfinite(np.diag(cov)), np.diag(cov), np.inf), 0.0, None))
     var_logzeta = cov[ITAU, ITAU] + cov[IW, IW] + 2 * cov[ITAU, IW]
-    held = resonance_held is not None
     derived = {
         "static_gain": {"value": k, "std_err": abs(k) * float(sd[IK])},
         "lag": {"value": tau, "std_err": tau * float(sd[ITAU])},
@@ -458,53 +596,21 @@ def build_result(
     for key, get in (("static_gain", lambda q: q.static_gain), ("lag", lambda q: q.a2 / q.a1)):
         spread = max((abs(get(q) - derived[key]["value"]) for q in alt), default=0.0)
         derived[key]["std_err"] = max(derived[key]["std_err"], spread / Z95)
-    y_model = prob.predict(theta)
-    res_um = y_model - prob.y
-    fit_train = fit_percent(prob.y, y_model)
-    rc = r - r.mean()
-    energy = float(rc @ rc)
-    lags = range(1, min(51, rc.size))
-    acf = np.array([rc[k:] @ rc[:-k] for k in lags]) / energy if energy > 0 else np.zeros(1)
-    whiteness = (float(acf[0]), float(np.mean(np.abs(acf) > 2.0 / math.sqrt(rc.size))))
-    traces = {"t": data.t, "u": data.u, "y": data.y, "y_model": y_model}
-    fit_val = rms_val = None
-    if validation is not None:
-        vprob = Problem(delayed(validation.u, delay), validation.y, validation.dt, prob.sign)
-        v_model, fit_val = _validate(vprob, theta)
-        rms_val = float(np.sqrt(np.mean((v_model - validation.y) ** 2)))
-        traces.update(
-            {
-                "val_t": validation.t,
-                "val_u": validation.u,
-                "val_y": validation.y,
-                "val_y_model": v_model,
-            }
-        )
-    if alternatives:
-        f_alt = sorted(math.sqrt(q.a1) / (2 * math.pi) for q in alt)
-        extra = f" (widened: {', '.join(widened)})" if widened else ""
-        widened_note = (
-            f"With the resonance at {_hz_range(f_alt)} the record is fitted as well "
-            f"({len(alt)} refit(s) within the chi-square 95 % misfit): the intervals "
-            f"and the static gain's and lag's standard errors cover those estimates too{extra}."
-        )
-    else:
-        widened_note = ""
-    notes = _diagnose(
-        p=p,
-        u=data.u,
-        dt=data.dt,
-        rel=rel,
-        corr=corr,
-        derived=derived,
-        resonance_held=resonance_held,
-        delay=delay,
-        theta=theta,
-        r_acf1=whiteness,
-        fit_train=fit_train,
+    return derived
+
+
+def _widened_note(alt: list[BoucWenParams], widened: list[str]) -> str:
+    f_alt = sorted(math.sqrt(q.a1) / (2 * math.pi) for q in alt)
+    extra = f" (widened: {', '.join(widened)})" if widened else ""
+    return (
+        f"With the resonance at {_hz_range(f_alt)} the record is fitted as well "
+        f"({len(alt)} refit(s) within the chi-square 95 % misfit): the intervals "
+        f"and the static gain's and lag's standard errors cover those estimates too{extra}."
     )
-    if widened_note:
-        notes.append(widened_note)
+
+
+def _convergence(sol: Any, values: dict[str, float]) -> tuple[bool, str]:
+    """``(converged, reason)``: the optimiser met its tolerances and the optimum is finite."""
     finite = all(math.isfinite(v) for v in values.values()) and math.isfinite(sol.cost)
     converged = bool(sol.status > 0 and finite)
     reason = str(sol.message) if finite else "the optimum is not finite"
@@ -513,35 +619,4 @@ def build_result(
             f"the optimiser used its {sol.nfev} residual evaluations without meeting its "
             "tolerances; give a better --init or a richer record"
         )
-    h0 = float(theta[IZ] * p.alpha / (p.beta + p.gamma))
-    w0 = p.static_gain * float(prob.u[0]) - h0
-    x0 = (w0 + prob.y_scale * float(theta[IE1]), prob.y_scale * wn * float(theta[IE2]), h0)
-    return IdentificationResult(
-        params=p,
-        std_err=se,
-        ci95=ci,
-        correlation=corr,
-        determined=determined,
-        derived=derived,
-        fit_percent={"train": fit_train, "validation": fit_val},
-        residual_rms=float(np.sqrt(np.mean(res_um**2))),
-        residual_rms_validation=rms_val,
-        offset=prob.y_mean + prob.y_scale * float(theta[IOFF]),
-        offset_std_err=prob.y_scale * float(sd[IOFF]),
-        initial_state=x0,
-        delay_samples=delay,
-        dt=data.dt,
-        n_samples=data.n,
-        diagnostics=tuple(notes),
-        converged=converged,
-        reason=reason,
-        covariance_method=(
-            f"Newey-West sandwich (Bartlett weights, lag {lag} samples) on the Jacobian at "
-            "the optimum, each variance at least the white-noise s^2 (J^T J)^-1; delta "
-            "method to a1..gamma"
-        ),
-        nfev=nfev,
-        n_starts=n_starts,
-        seconds=seconds,
-        traces=traces,
-    )
+    return converged, reason

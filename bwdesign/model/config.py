@@ -26,7 +26,6 @@ import os
 import stat
 import tomllib
 from dataclasses import dataclass
-from numbers import Real
 from pathlib import Path
 from typing import Any
 
@@ -35,11 +34,16 @@ from ..validate import (
     DECAY,
     DT,
     GAIN,
+    LAMBDA,
+    NONNEGATIVE,
     POLE_RADIUS,
+    POSITIVE,
+    SEED,
     SIGNAL,
     UDOT_MAX,
     Range,
     below_nyquist,
+    integer,
     real,
 )
 from .envelope import Envelope, derive_envelope, given_envelope
@@ -158,20 +162,19 @@ class StageConfig:
 
 
 def _num(value: Any, where: str, *, positive: bool = False, within: Range | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise ConfigError(f"{where} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ConfigError(f"{where} must be finite, got {value}")
-    if positive and value <= 0:
-        raise ConfigError(f"{where} must be a positive number, got {value:g}")
+    """A TOML number through :func:`bwdesign.validate.real` (``ConfigError``).
+
+    ``positive`` without ``within``: any finite number > 0 (:data:`POSITIVE`).
+    """
+    if within is None and positive:
+        within = POSITIVE
     return real(value, where, within=within, error=ConfigError)
 
 
-#: Supported range of the eq. (12) constants lambda1, lambda2 (1/s).
-LAMBDA = Range(0.0, 1e12, lo_open=True, unit="1/s")
 #: Supported range of the envelope margin (a factor >= 1).
 MARGIN = Range(1.0, 1e6)
+#: Number of scenarios of a ``[sweep]`` (its upper limit is the sweep's own, by memory).
+SAMPLES = Range(1, math.inf)
 
 
 def _check_keys(table: Any, section: str, allowed: set[str]) -> dict[str, Any]:
@@ -200,15 +203,9 @@ def _sweep(table: Any) -> dict[str, Any] | None:
         "noise_std_um": 0.0,
         "distribution": "uniform",
     }
-    for key in ("samples", "seed"):
+    for key, within in (("samples", SAMPLES), ("seed", SEED)):
         if key in t:
-            v = t[key]
-            if isinstance(v, bool) or not isinstance(v, int) or v < (1 if key == "samples" else 0):
-                raise ConfigError(
-                    f"[sweep] {key} must be an integer {'> 0' if key == 'samples' else '>= 0'}, "
-                    f"got {v!r}"
-                )
-            out[key] = v
+            out[key] = integer(t[key], f"[sweep] {key}", within=within, error=ConfigError)
     choices = {"tuning": ("config", "digital"), "distribution": ("uniform", "normal")}
     for key, allowed in choices.items():
         if key in t:
@@ -229,11 +226,9 @@ def _sweep(table: Any) -> dict[str, Any] | None:
                 "once (every scenario would count twice)"
             )
         out["observers"] = tuple(obs)
-    for key in ("noise_std_um", "duration_s"):
+    for key, within in (("noise_std_um", NONNEGATIVE), ("duration_s", POSITIVE)):
         if key in t:
-            out[key] = _num(t[key], f"[sweep] {key}", positive=key == "duration_s")
-            if out[key] < 0:
-                raise ConfigError(f"[sweep] {key} must be >= 0, got {t[key]!r}")
+            out[key] = _num(t[key], f"[sweep] {key}", within=within)
     return out
 
 
@@ -316,9 +311,6 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
             if reference is None:
                 raise ConfigError("[envelope]: from_reference = true needs a [reference] section")
             if "margin" in env:
-                env["margin"] = _num(env["margin"], "[envelope] margin")
-                if env["margin"] < 1:
-                    raise ConfigError(f"[envelope] margin must be >= 1, got {env['margin']:g}")
                 env["margin"] = _num(env["margin"], "[envelope] margin", within=MARGIN)
         else:
             raise ConfigError(

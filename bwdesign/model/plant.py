@@ -20,7 +20,6 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from numbers import Real
 
 import numpy as np
 from scipy.linalg import expm
@@ -199,13 +198,8 @@ def discretize(params: BoucWenParams, dt: float) -> ZOHModel:
     return ZOHModel(F=F, g=g, dt=dt)
 
 
-def _check_dt(dt: float) -> float:
+def check_dt(dt: float) -> float:
     """``dt`` (s) as a float in the supported range :data:`bwdesign.validate.DT`."""
-    if isinstance(dt, bool) or not isinstance(dt, Real):
-        raise InputError(f"dt must be a number of seconds, got {dt!r}")
-    dt = float(dt)
-    if not math.isfinite(dt) or dt <= 0:
-        raise InputError(f"dt must be a finite number of seconds > 0, got {dt}")
     return real(dt, "dt (s)", within=DT)
 
 
@@ -237,7 +231,7 @@ def check_sample_time(params: BoucWenParams, dt: float) -> float:
     InputError
         ``dt`` is not a number, not finite, or outside either range.
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     sigma = slowest_decay(params)
     if sigma * dt > MAX_DECAY_DT:
         label = params.name or "the plant"
@@ -330,8 +324,7 @@ def simulate_zoh(
         raise InputError(f"u must be a 1-D sequence of held inputs, got shape {u.shape}")
     if not np.all(np.isfinite(u)):
         raise InputError("u must be finite")
-    if not math.isfinite(u_prev):
-        raise InputError(f"u_prev must be finite, got {u_prev}")
+    u_prev = real(u_prev, "u_prev")
     x0 = _as_state(x0, "x0")
     zoh = discretize(params, dt)
     (f11, f12, f13), (f21, f22, f23) = zoh.F[0], zoh.F[1]

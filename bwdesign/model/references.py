@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -43,18 +42,8 @@ from ..validate import SIGNAL, Range, real
 __all__ = ["Reference", "Sine", "Triangle", "Step", "reference_from_dict"]
 
 
-def _finite(
-    value: Any, name: str, owner: str, *, positive: bool = False, nonneg: bool = False
-) -> float:
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise ConfigError(f"{owner}: {name} must be a number, got {value!r}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise ConfigError(f"{owner}: {name} must be finite, got {value}")
-    if positive and value <= 0:
-        raise ConfigError(f"{owner}: {name} must be > 0, got {value}")
-    if nonneg and value < 0:
-        raise ConfigError(f"{owner}: {name} must be >= 0, got {value}")
+def _finite(value: Any, name: str, owner: str) -> float:
+    """A reference field through :func:`bwdesign.validate.real` in its :data:`REFERENCE_RANGES`."""
     return real(value, f"{owner}: {name}", within=REFERENCE_RANGES[name], error=ConfigError)
 
 
@@ -146,9 +135,7 @@ class Sine(Reference):
         o = "sine reference"
         object.__setattr__(self, "amplitude", _finite(self.amplitude, "amplitude", o))
         object.__setattr__(self, "offset", _finite(self.offset, "offset", o))
-        object.__setattr__(
-            self, "frequency", _finite(self.frequency, "frequency", o, positive=True)
-        )
+        object.__setattr__(self, "frequency", _finite(self.frequency, "frequency", o))
         object.__setattr__(self, "phase", _finite(self.phase, "phase", o))
 
     @property
@@ -212,13 +199,9 @@ class Triangle(Reference):
         o = "triangle reference"
         object.__setattr__(self, "amplitude", _finite(self.amplitude, "amplitude", o))
         object.__setattr__(self, "offset", _finite(self.offset, "offset", o))
-        object.__setattr__(
-            self, "frequency", _finite(self.frequency, "frequency", o, positive=True)
-        )
+        object.__setattr__(self, "frequency", _finite(self.frequency, "frequency", o))
         object.__setattr__(self, "phase", _finite(self.phase, "phase", o))
-        object.__setattr__(
-            self, "corner_time", _finite(self.corner_time, "corner_time", o, nonneg=True)
-        )
+        object.__setattr__(self, "corner_time", _finite(self.corner_time, "corner_time", o))
         if self.corner_time >= 0.5 / self.frequency:
             raise ConfigError(
                 f"triangle reference: corner_time must be shorter than half a period "
@@ -321,7 +304,7 @@ class Step(Reference):
         object.__setattr__(self, "amplitude", _finite(self.amplitude, "amplitude", o))
         object.__setattr__(self, "offset", _finite(self.offset, "offset", o))
         object.__setattr__(self, "t_step", _finite(self.t_step, "t_step", o))
-        object.__setattr__(self, "rise_time", _finite(self.rise_time, "rise_time", o, nonneg=True))
+        object.__setattr__(self, "rise_time", _finite(self.rise_time, "rise_time", o))
 
     def evaluate(self, t):
         t = np.asarray(t, dtype=float)

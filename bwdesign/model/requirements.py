@@ -21,10 +21,10 @@ optional; unknown keys and wrong types are :class:`~bwdesign.errors.ConfigError`
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from ..errors import ConfigError
+from ..validate import NONNEGATIVE, POSITIVE, Range, real
 
 __all__ = ["REQUIREMENT_KEYS", "SETTING_KEYS", "parse_requirements"]
 
@@ -45,6 +45,9 @@ SETTING_KEYS: dict[str, tuple[type, str]] = {
     "start": (str, '"reference" (as the report: on the reference at t = 0) or "rest"'),
 }
 
+#: Supported range of each number that is not :data:`~bwdesign.validate.NONNEGATIVE`.
+_RANGES = {"min_gain_margin_db": Range(), "duration_s": POSITIVE}
+
 
 def parse_requirements(table: Any) -> dict[str, Any]:
     """Validate a ``[requirements]`` table; returns it with numbers as floats."""
@@ -59,24 +62,18 @@ def parse_requirements(table: Any) -> dict[str, Any]:
         )
     out: dict[str, Any] = {}
     for key, value in table.items():
-        kind, meaning = allowed[key]
+        kind, _ = allowed[key]
         if kind is bool:
             if not isinstance(value, bool):
                 raise ConfigError(f"[requirements] {key} must be true or false, got {value!r}")
             out[key] = value
         elif kind is float:
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise ConfigError(
-                    f"[requirements] {key} must be a number ({meaning}), got {value!r}"
-                )
-            v = float(value)
-            if not math.isfinite(v) or (v < 0 and key != "min_gain_margin_db"):
-                raise ConfigError(
-                    f"[requirements] {key} must be a finite number >= 0, got {value!r}"
-                )
-            if key == "duration_s" and v <= 0:
-                raise ConfigError(f"[requirements] duration_s must be > 0, got {value!r}")
-            out[key] = v
+            out[key] = real(
+                value,
+                f"[requirements] {key}",
+                within=_RANGES.get(key, NONNEGATIVE),
+                error=ConfigError,
+            )
         else:
             choices = ("phso", "eso") if key == "observer" else ("reference", "rest")
             if value not in choices:

@@ -3,20 +3,20 @@
 from __future__ import annotations
 
 import math
-import numbers
 from typing import Any
 
 import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import _check_dt, discretize, hysteresis_increment
+from ..model.plant import check_dt, discretize, hysteresis_increment
+from ..validate import real
 from .dynamics import observer_iosystem
-from .gains import C, _as_gains, check_gains, discrete_gains, schur_margin
+from .gains import C, as_gains, check_gains, discrete_gains, schur_margin
 
 
-def _finite_scalar(v: Any, name: str) -> float:
-    """``v`` as a finite float.
+def finite_scalar(v: Any, name: str) -> float:
+    """``v`` as a finite float (:func:`bwdesign.validate.real`).
 
     Accepted: any ``numbers.Real`` (python and numpy integers and floats) and a
     numeric array of size 1 (filterpy's ``z`` of shape (1,)). Refused with
@@ -25,26 +25,22 @@ def _finite_scalar(v: Any, name: str) -> float:
     """
     if isinstance(v, bool | np.bool_):
         raise InputError(f"{name} must be a number, got the boolean {v!r}")
-    if isinstance(v, numbers.Real):
-        f = float(v)
-    elif isinstance(v, np.ndarray | list | tuple):
+    if isinstance(v, np.ndarray | list | tuple):
         a = np.asarray(v)
         if a.dtype.kind not in "fiu":
             raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
         if a.size != 1:
             raise InputError(f"{name} must be a single number, got shape {a.shape}")
-        f = float(a.reshape(()))
-    else:
-        raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
-    if not math.isfinite(f):
-        raise InputError(f"{name} must be finite, got {f}")
-    return f
+        v = a.reshape(()).item()
+    elif isinstance(v, np.generic):
+        v = v.item()  # a python number, so that messages print it as python does
+    return real(v, name)
 
 
 _WORDS = {3: "three", 4: "four"}
 
 
-def _state(value: Any, name: str = "x", n: int = 3) -> np.ndarray:
+def state_vector(value: Any, name: str = "x", n: int = 3) -> np.ndarray:
     """A state as a new float array of shape (n,); (n,) and filterpy's (n, 1) are accepted."""
     a = np.asarray(value)
     if a.dtype.kind not in "fiu" or a.shape not in ((n,), (n, 1)):
@@ -58,7 +54,7 @@ def _state(value: Any, name: str = "x", n: int = 3) -> np.ndarray:
     return x
 
 
-def _require_finite_state(x: Any, owner: str) -> None:
+def require_finite_state(x: Any, owner: str) -> None:
     """Refuse to step from a non-finite estimate (e.g. ``obs.x[0] = nan`` in place)."""
     if not np.all(np.isfinite(x)):
         raise InputError(
@@ -66,7 +62,8 @@ def _require_finite_state(x: Any, owner: str) -> None:
         )
 
 
-def _check_params(params: Any, owner: str) -> None:
+def check_params(params: Any, owner: str) -> None:
+    """Refuse anything but a :class:`BoucWenParams` (``owner`` names the caller)."""
     if not isinstance(params, BoucWenParams):
         hint = " (a preset name? use bwdesign.preset(name))" if isinstance(params, str) else ""
         raise InputError(
@@ -74,7 +71,7 @@ def _check_params(params: Any, owner: str) -> None:
         )
 
 
-def _measurements(zs: Any, n: int) -> list[float | None]:
+def as_measurements(zs: Any, n: int) -> list[float | None]:
     """Validate a record of measurements (``None`` = missing) as python floats."""
     if isinstance(zs, np.ndarray) and zs.dtype.kind in "fiu":
         z = zs.reshape(-1) if zs.ndim == 2 and zs.shape[1:] == (1,) else zs
@@ -96,10 +93,11 @@ def _measurements(zs: Any, n: int) -> list[float | None]:
         )
     if len(zs) != n:
         raise InputError(f"zs and us must have the same length, got {len(zs)} and {n}")
-    return [None if z is None else _finite_scalar(z, "z") for z in zs]
+    return [None if z is None else finite_scalar(z, "z") for z in zs]
 
 
-def _inputs(us: Any) -> list[float]:
+def as_inputs(us: Any) -> list[float]:
+    """Validate a record of held inputs as python floats."""
     u = np.asarray(us)
     if u.dtype.kind not in "fiu":
         raise InputError(
@@ -114,7 +112,7 @@ def _inputs(us: Any) -> list[float]:
     return u.tolist()
 
 
-class _SampledObserver:
+class SampledObserver:
     """Shared machinery of the discrete observers (filterpy-style interface).
 
     One base serves the 3-state observers (x1, x2, x3) and the 4-state
@@ -162,10 +160,10 @@ class _SampledObserver:
         u_prev: float = 0.0,
         allow_unbounded: bool = False,
     ) -> None:
-        _check_params(params, type(self).__name__)
+        check_params(params, type(self).__name__)
         require_bounded(params, allow_unbounded)
         self.params = params
-        self.dt = _check_dt(dt)
+        self.dt = check_dt(dt)
         self._zoh = discretize(params, self.dt)
         F, g = self._zoh.F, self._zoh.g
         # the two non-trivial rows of F and g (row 3 is x3+ = h, g3 = 0)
@@ -211,7 +209,7 @@ class _SampledObserver:
 
     @staticmethod
     def _check_discrete(discrete: Any) -> np.ndarray:
-        return _as_gains(discrete, "discrete gains K")
+        return as_gains(discrete, "discrete gains K")
 
     @staticmethod
     def _observable_K(K: np.ndarray) -> np.ndarray:
@@ -222,11 +220,11 @@ class _SampledObserver:
 
     def reset(self, x0: Any = None, *, u_prev: float = 0.0) -> None:
         """Restart from ``x0`` (default zeros) with ``u_prev`` (V) held before the first sample."""
-        x = np.zeros(self._n) if x0 is None else _state(x0, "x0", self._n)
+        x = np.zeros(self._n) if x0 is None else state_vector(x0, "x0", self._n)
         self._x = x
         self.x_prior = x.copy()
         self.x_post = x.copy()
-        self.u_prev = _finite_scalar(u_prev, "u_prev")
+        self.u_prev = finite_scalar(u_prev, "u_prev")
         self.y = 0.0
         self.z: float | None = None
 
@@ -241,7 +239,7 @@ class _SampledObserver:
 
     @x.setter
     def x(self, value: Any) -> None:
-        self._x = _state(value, "x", self._n)
+        self._x = state_vector(value, "x", self._n)
 
     @property
     def x_lumped(self) -> np.ndarray:
@@ -253,7 +251,7 @@ class _SampledObserver:
 
     def _finite(self, xs: list[float]) -> None:
         if not all(math.isfinite(v) for v in xs):
-            _require_finite_state(self._x, type(self).__name__)
+            require_finite_state(self._x, type(self).__name__)
 
     def predict(self, u: float) -> None:
         """Carry the estimate from ``t_k`` to ``t_{k+1}`` with ``u`` (V) held.
@@ -262,12 +260,12 @@ class _SampledObserver:
         in closed form; then the linear part is propagated exactly (ZOH), with
         ``x3 + d`` in place of ``x3`` for the disturbance observer (``d`` held).
         """
-        u = _finite_scalar(u, "u")
+        u = finite_scalar(u, "u")
         xs = self._x.tolist()
         if self._n == 3:
             x1, x2, x3 = xs
             if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
-                _require_finite_state(self._x, type(self).__name__)
+                require_finite_state(self._x, type(self).__name__)
             d = None
         else:
             self._finite(xs)
@@ -296,12 +294,12 @@ class _SampledObserver:
             self.y = 0.0
             self.x_post = self._x.copy()
             return
-        z = _finite_scalar(z, "z")
+        z = finite_scalar(z, "z")
         xs = self._x.tolist()
         if self._n == 3:
             x1, x2, x3 = xs
             if not (math.isfinite(x1) and math.isfinite(x2) and math.isfinite(x3)):
-                _require_finite_state(self._x, type(self).__name__)
+                require_finite_state(self._x, type(self).__name__)
             k1, k2, k3 = self.K.tolist()
             r = z - x1
             post = (x1 + k1 * r, x2 + k2 * r, x3 + k3 * r)
@@ -332,8 +330,8 @@ class _SampledObserver:
         ndarray, shape (N, n)
             The posterior estimates at ``t_1 .. t_N``.
         """
-        ul = _inputs(us)
-        zl = _measurements(zs, len(ul))
+        ul = as_inputs(us)
+        zl = as_measurements(zs, len(ul))
         if not ul:
             return np.empty((0, self._n))
         f11, f12, f13, f21, f22, f23, g1, g2 = self._coef

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams
-from ..model.plant import _check_dt, discretize
+from ..model.plant import check_dt, discretize
 from ..validate import GAIN
 
 __all__ = [
@@ -33,7 +33,8 @@ __all__ = [
 C = np.array([1.0, 0.0, 0.0])
 
 
-def _as_gains(gains: Any, what: str = "gains") -> np.ndarray:
+def as_gains(gains: Any, what: str = "gains") -> np.ndarray:
+    """``gains`` as three finite floats inside :data:`bwdesign.validate.GAIN`, or ``GainError``."""
     try:
         g = np.asarray(gains)
     except (TypeError, ValueError):
@@ -67,7 +68,7 @@ def hurwitz_violations(params: BoucWenParams, gains: Any) -> list[str]:
         The gains are not three finite numbers in the supported range (a malformed
         input, as opposed to well-formed gains that are not stabilising).
     """
-    l1, l2, l3 = _as_gains(gains)
+    l1, l2, l3 = as_gains(gains)
     a1, a2 = params.a1, params.a2
     c2 = (l1 + a2) * (l1 * a2 + a1 + l2) + l3 * a1
     failed = []
@@ -97,7 +98,7 @@ def check_gains(params: BoucWenParams, gains: Any) -> np.ndarray:
     GainError
         Wrong length, non-finite, or a violated condition (named in the message).
     """
-    l1, l2, l3 = g = _as_gains(gains)
+    l1, l2, l3 = g = as_gains(gains)
     failed = hurwitz_violations(params, g)
     if failed:
         raise GainError(
@@ -112,7 +113,7 @@ def error_matrix(params: BoucWenParams, gains: Any) -> np.ndarray:
 
     ``A = [[-l1, 1, 0], [-(a1 + l2), -a2, -a1], [-l3, 0, 0]]``.
     """
-    l1, l2, l3 = _as_gains(gains)
+    l1, l2, l3 = as_gains(gains)
     return np.array([[-l1, 1.0, 0.0], [-(params.a1 + l2), -params.a2, -params.a1], [-l3, 0.0, 0.0]])
 
 
@@ -140,7 +141,7 @@ def delta_transition(params: BoucWenParams, dt: float) -> tuple[np.ndarray, np.n
     Fd : ndarray, shape (3, 3)
         ``(F - I)/dt`` (1/s).
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     F = np.array(discretize(params, dt).F)
     return F, _delta_form(params.a1, params.a2, dt).copy()
 
@@ -189,7 +190,7 @@ def discrete_gains(params: BoucWenParams, gains: Any, dt: float) -> np.ndarray:
     -------
     ndarray, shape (3,)
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     w0 = math.sqrt(params.a1)
     T = np.array([1.0, w0, 1.0])
     A = error_matrix(params, gains)
@@ -227,7 +228,7 @@ def _place_z(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.ndarray:
 
 def place_discrete(params: BoucWenParams, poles: np.ndarray, dt: float) -> np.ndarray:
     """``K`` with eig((I - K C) F) = ``poles`` (a self-conjugate set of three)."""
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     z = np.asarray(poles, dtype=complex).ravel()
     return _place_delta(params, (z - 1.0) / dt, dt)
 
@@ -266,9 +267,9 @@ def schur_margin(params: BoucWenParams, K: Any, dt: float) -> tuple[float, np.nd
     z : ndarray, shape (3,)
         The poles ``z_i``.
     """
-    dt = _check_dt(dt)
+    dt = check_dt(dt)
     F, Fd = delta_transition(params, dt)
-    K = _as_gains(K, "discrete gains K")
+    K = as_gains(K, "discrete gains K")
     w0 = math.sqrt(params.a1)
     T = np.array([1.0, w0, 1.0])
     Ad = Fd - np.outer(K / dt, F[0])
@@ -305,7 +306,7 @@ def disturbance_gains_from(gains: Any) -> tuple[float, float, float, float]:
     hysteresis copy runs on the model alone (``l3 = 0``). The same map takes
     discrete 3-state gains ``(k1, k2, k3)`` to the PHDO's ``(k1, k2, 0, k3)``.
     """
-    l1, l2, l3 = (float(g) for g in _as_gains(gains))
+    l1, l2, l3 = (float(g) for g in as_gains(gains))
     return (l1, l2, 0.0, l3)
 
 
@@ -336,7 +337,7 @@ def gains_for_observer(observer: str, gains: Any) -> tuple[float, ...]:
         )
     if observer == "phdo":
         return disturbance_gains_from(gains)
-    return tuple(float(g) for g in _as_gains(gains))
+    return tuple(float(g) for g in as_gains(gains))
 
 
 def check_disturbance_gains(params: BoucWenParams, gains: Any) -> np.ndarray:
@@ -383,5 +384,5 @@ def disturbance_discrete_gains(params: BoucWenParams, gains: Any, dt: float) -> 
 def check_disturbance_discrete(K: Any) -> np.ndarray:
     """Validate discrete gains ``(k1, k2, k3, k4)``; ``(k1, k2, k3 + k4)`` must be in range."""
     g = _as_four(K, "discrete gains K")
-    _as_gains((g[0], g[1], g[2] + g[3]), "discrete gains (k1, k2, k3 + k4)")
+    as_gains((g[0], g[1], g[2] + g[3]), "discrete gains (k1, k2, k3 + k4)")
     return g

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from ..model.params import BoucWenParams
-from .base import _SampledObserver
+from .base import SampledObserver
 from .gains import (
     check_disturbance_discrete,
     check_disturbance_gains,
@@ -49,7 +49,7 @@ from .gains import (
 __all__ = ["HysteresisObserver", "ExtendedStateObserver", "DisturbanceHysteresisObserver"]
 
 
-class HysteresisObserver(_SampledObserver):
+class HysteresisObserver(SampledObserver):
     """The paper's hysteresis observer (PHSO, eq. 3), sampled exactly.
 
     Parameters
@@ -82,7 +82,7 @@ class HysteresisObserver(_SampledObserver):
     kind = "phso"
 
 
-class ExtendedStateObserver(_SampledObserver):
+class ExtendedStateObserver(SampledObserver):
     """Extended state observer (ESO, eq. 21): x3 treated as an unknown constant.
 
     Same constructor and interface as :class:`HysteresisObserver`; its predict
@@ -93,7 +93,7 @@ class ExtendedStateObserver(_SampledObserver):
     kind = "eso"
 
 
-class DisturbanceHysteresisObserver(_SampledObserver):
+class DisturbanceHysteresisObserver(SampledObserver):
     """Hysteresis observer with an integrating disturbance state (kind ``"phdo"``).
 
     States ``(x1, x2, x3, d)``: the PHSO's model copy plus a constant-disturbance

@@ -35,22 +35,21 @@ Default noise model (:func:`default_noise`), for a plant in length unit L
 from __future__ import annotations
 
 import functools
-import math
-import numbers
 from typing import Any
 
 import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import _check_dt, discretize, zoh_step
+from ..model.plant import check_dt, discretize, zoh_step
+from ..validate import POSITIVE, UDOT_MAX, real
 from .base import (
-    _check_params,
-    _finite_scalar,
-    _inputs,
-    _measurements,
-    _require_finite_state,
-    _state,
+    as_inputs,
+    as_measurements,
+    check_params,
+    finite_scalar,
+    require_finite_state,
+    state_vector,
 )
 
 __all__ = ["UnscentedObserver", "default_noise", "max_hysteresis_slope"]
@@ -91,9 +90,9 @@ def default_noise(
     P0 : ndarray, shape (3, 3)
         ``diag(h_max^2, a1 h_max^2, h_max^2)``.
     """
-    dt = _check_dt(dt)
-    udot_max = _positive(udot_max, "udot_max (V/s)")
-    noise_std = _positive(noise_std, "noise_std (length unit)")
+    dt = check_dt(dt)
+    udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+    noise_std = real(noise_std, "noise_std (length unit)", within=POSITIVE)
     s_h = max_hysteresis_slope(params) * udot_max * dt
     g = discretize(params, dt).F[:, 2]
     Q = s_h**2 * np.outer(g, g)
@@ -102,15 +101,6 @@ def default_noise(
     h = verdict.h_max if verdict.bounded else params.alpha
     P0 = np.diag([h**2, params.a1 * h**2, h**2])
     return Q, R, P0
-
-
-def _positive(v: Any, name: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, numbers.Real):
-        raise InputError(f"{name} must be a number, got {type(v).__name__} {v!r}")
-    v = float(v)
-    if not math.isfinite(v) or v <= 0:
-        raise InputError(f"{name} must be a finite number > 0, got {v}")
-    return v
 
 
 def _matrix(M: Any, shape: tuple[int, int], name: str) -> np.ndarray:
@@ -204,10 +194,10 @@ class UnscentedObserver:
         # filterpy pulls in scipy.stats (~0.4 s): imported here, not with bwdesign
         from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
-        _check_params(params, "UnscentedObserver")
+        check_params(params, "UnscentedObserver")
         require_bounded(params, allow_unbounded)
         self.params = params
-        self.dt = _check_dt(dt)
+        self.dt = check_dt(dt)
         if Q is None and udot_max is None:
             raise InputError(
                 "UnscentedObserver: give udot_max (V/s, the input-rate envelope) for the "
@@ -220,8 +210,10 @@ class UnscentedObserver:
                 udot_max=1.0 if udot_max is None else udot_max,
                 noise_std=noise_std,
             )
-        self.udot_max = None if udot_max is None else _positive(udot_max, "udot_max (V/s)")
-        self.noise_std = _positive(noise_std, "noise_std (length unit)")
+        self.udot_max = (
+            None if udot_max is None else real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
+        )
+        self.noise_std = real(noise_std, "noise_std (length unit)", within=POSITIVE)
         if points is None:
             points = MerweScaledSigmaPoints(3, alpha=1.0, beta=2.0, kappa=0.0)
         self.ukf = UnscentedKalmanFilter(
@@ -240,13 +232,13 @@ class UnscentedObserver:
     # -- state -------------------------------------------------------------
     def reset(self, x0: Any = None, *, u_prev: float = 0.0, P0: Any = None) -> None:
         """Restart from ``x0`` (default zeros) and ``P0`` (default: the constructor's)."""
-        x = np.zeros(3) if x0 is None else _state(x0, "x0")
+        x = np.zeros(3) if x0 is None else state_vector(x0, "x0")
         P = self._P0 if P0 is None else _matrix(P0, (3, 3), "P0")
         f = self.ukf
         f.x, f.P = x, P.copy()
         f.x_prior, f.P_prior = x.copy(), P.copy()
         f.x_post, f.P_post = x.copy(), P.copy()
-        self.u_prev = _finite_scalar(u_prev, "u_prev")
+        self.u_prev = finite_scalar(u_prev, "u_prev")
         self.y = 0.0
         self.z: float | None = None
 
@@ -257,7 +249,7 @@ class UnscentedObserver:
 
     @x.setter
     def x(self, value: Any) -> None:
-        self.ukf.x = _state(value, "x")
+        self.ukf.x = state_vector(value, "x")
 
     @property
     def P(self) -> np.ndarray:
@@ -327,8 +319,8 @@ class UnscentedObserver:
     # -- filtering ---------------------------------------------------------
     def predict(self, u: float) -> None:
         """Propagate the sigma points one sample with ``u`` (V) held (exact plant step)."""
-        u = _finite_scalar(u, "u")
-        _require_finite_state(self.ukf.x, "UnscentedObserver")
+        u = finite_scalar(u, "u")
+        require_finite_state(self.ukf.x, "UnscentedObserver")
         self.ukf.predict(u_prev=self.u_prev, u=u)
         self.u_prev = u
 
@@ -338,8 +330,8 @@ class UnscentedObserver:
             self.ukf.update(None)
             self.z, self.y = None, 0.0
             return
-        z = _finite_scalar(z, "z")
-        _require_finite_state(self.ukf.x, "UnscentedObserver")
+        z = finite_scalar(z, "z")
+        require_finite_state(self.ukf.x, "UnscentedObserver")
         self.ukf.update(np.array([z]))
         self.z, self.y = z, float(self.ukf.y[0])
 
@@ -358,12 +350,12 @@ class UnscentedObserver:
         ndarray, shape (N, 3)
             Posterior estimates at ``t_1 .. t_N``.
         """
-        ul = _inputs(us)
-        zl = _measurements(zs, len(ul))
+        ul = as_inputs(us)
+        zl = as_measurements(zs, len(ul))
         out = np.empty((len(ul), 3))
         f = self.ukf
         if ul:
-            _require_finite_state(f.x, "UnscentedObserver")
+            require_finite_state(f.x, "UnscentedObserver")
         up = self.u_prev
         for k, (uk, zk) in enumerate(zip(ul, zl, strict=True)):
             f.predict(u_prev=up, u=uk)

@@ -40,7 +40,7 @@ import numpy as np
 
 from .. import interrupts
 from ..control.loop import ON_REFERENCE, ClosedLoop, Start
-from ..errors import BWDesignError, ConfigError, InputError
+from ..errors import BWDesignError, ConfigError, InputError, SweepError
 from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
@@ -95,10 +95,6 @@ _ADDRESS = re.compile(
     r"(?:(?P<scheme>tcp|tls)://)?(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?)"
     r":(?P<port>[0-9]{1,5})/?"
 )
-
-
-class SweepError(BWDesignError, RuntimeError):
-    """A sweep could not be completed (a chunk failed after its retries, no scheduler)."""
 
 
 @dataclass(frozen=True)

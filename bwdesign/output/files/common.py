@@ -8,7 +8,7 @@ import re
 import stat
 from pathlib import Path
 
-from ...errors import OutputError
+from ...errors import InputError, OutputError
 
 __all__ = [
     "MANIFEST",
@@ -30,7 +30,7 @@ def command_slug(command: str) -> str:
     """``command`` as staging names spell it (``"identify --report"``: ``identify-report``)."""
     slug = re.sub(r"[^A-Za-z0-9]+", "-", command).strip("-")
     if not slug:
-        raise ValueError(f"command must name the writer, got {command!r}")
+        raise InputError(f"command must name the writer, got {command!r}")
     return slug
 
 

@@ -48,7 +48,7 @@ class Stage:
         """A path inside the stage for ``relpath`` (parents created), for any writer."""
         rel = Path(relpath)
         if rel.is_absolute() or ".." in rel.parts or not rel.parts:
-            raise ValueError(f"output path must be relative and inside the output: {relpath!r}")
+            raise OutputError(f"output path must be relative and inside the output: {relpath!r}")
         target = self.root / rel
         target.parent.mkdir(parents=True, exist_ok=True)
         return target
