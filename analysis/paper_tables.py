@@ -285,11 +285,9 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         "triangle": Triangle(amplitude=90, offset=100, frequency=1),
     }
     # the paper's constants as printed: run long enough for the slowest sampled pole
-    a_paper = analyze_loop(exp, SEC5["lambda1"], SEC5["lambda2"], SEC5["gains"], dt=DT)
+    a_paper = analyze_loop(make_loop(exp, "phso", dt=DT, **SEC5))
     dur_paper = float(min(150.0, max(3.0, math.ceil(12.0 / a_paper.slowest_decay_rate))))
-    a_paper_d = analyze_loop(
-        exp, SEC5["lambda1"], SEC5["lambda2"], SEC5["gains"], dt=DT, form="discrete"
-    )
+    a_paper_d = analyze_loop(make_loop(exp, "phso", dt=DT, form="discrete", **SEC5))
     dur_paper_d = float(min(150.0, max(3.0, math.ceil(12.0 / a_paper_d.slowest_decay_rate))))
     full_plus = dict(a1=exp.a1 * 1.02, a3=exp.a3 * 0.98, alpha=exp.alpha * 1.1,
                      beta=exp.beta * 0.9, gamma=exp.gamma * 1.1)  # fmt: skip
@@ -328,25 +326,17 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         log("digital loop: analysis of the Section 5 constants")
         g5 = SEC5["gains"]
         l1, l2 = SEC5["lambda1"], SEC5["lambda2"]
-        a_cont_design = analyze_loop(exp, l1, l2, g5)
-        a_state = analyze_loop(exp, l1, l2, g5, dt=DT, estimator="state")
+        paper_loop = make_loop(exp, "phso", dt=DT, **SEC5)
+        a_cont_design = analyze_loop(paper_loop.replace(dt=None))
+        a_state = analyze_loop(paper_loop, estimator="state")
         deltas = np.array([-5, -2, -1, -0.5, -0.1, -0.01, 0, 0.01, 0.1, 0.5, 1, 2, 5]) / 100
-        sw_paper = mismatch_sweep(exp, l1, l2, g5, dt=DT, deltas=deltas)
-        sw_state = mismatch_sweep(exp, l1, l2, g5, dt=DT, deltas=deltas, estimator="state")
+        sw_paper = mismatch_sweep(paper_loop, deltas=deltas)
+        sw_state = mismatch_sweep(paper_loop, deltas=deltas, estimator="state")
         log("digital tuning")
         tuning = digital_tuning(exp, DT)
         tk = tuning.controller_kwargs()
-        sw_tuned = mismatch_sweep(
-            exp,
-            tuning.lambda1,
-            tuning.lambda2,
-            tuning.gains,
-            dt=DT,
-            deltas=deltas,
-            form="discrete",
-            integral_rate=tuning.integral_rate,
-            delay=True,
-        )
+        tuned_loop = make_loop(exp, "phso", dt=DT, delay=True, **tuning.controller_kwargs())
+        sw_tuned = mismatch_sweep(tuned_loop, deltas=deltas)
         a_tuned = tuning.nominal
         tuning_paper_gains = digital_tuning(exp, DT, gains=g5)
 
@@ -403,7 +393,7 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         *side_by_side(rows1, "ours"),
         "",
     ]
-    a42 = analyze_loop(sim, SEC42["lambda1"], SEC42["lambda2"], SEC42["gains"])
+    a42 = analyze_loop(make_loop(sim, "phso", **SEC42))
     md += [
         "Linear loop of this setting (`analyze_loop`, continuous): poles "
         + ", ".join(fmt_pole(z) for z in sorted(a42.poles, key=lambda z: z.real))
@@ -911,17 +901,9 @@ def decay_check(exp, tuning) -> list[dict[str, Any]]:
             (0.1, 0.2),
         ),
     ]
-    for label, kw, akw, win in cases:
-        a = analyze_loop(
-            exp,
-            kw["lambda1"],
-            kw["lambda2"],
-            kw["gains"],
-            dt=DT,
-            form=kw.get("form", "continuous"),
-            **akw,
-        )
+    for label, kw, _, win in cases:
         loop = make_loop(exp, "phso", dt=DT, start=Start(xhat0=(2.0, 0, 0)), **kw)
+        a = analyze_loop(loop)
         r = simulate(loop, hold, duration=win[1] + 0.01)
         sel = (r.t >= win[0]) & (r.t <= win[1])
         rate = -np.polyfit(r.t[sel], np.log(np.abs(r.e[sel])), 1)[0]

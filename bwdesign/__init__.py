@@ -38,6 +38,7 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
         RobustObserverCertificate,
         RobustObserverSynthesis,
         certify_robust_observer,
+        certify_robust_observer_discrete,
         synthesize_robust_observer,
     )
     from .certify.synthesis import synthesize
@@ -85,6 +86,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
         "RobustObserverCertificate",
         "RobustObserverSynthesis",
         "certify_robust_observer",
+        "certify_robust_observer_discrete",
         "synthesize_robust_observer",
     ),
     ".certify.synthesis": ("synthesize",),
@@ -194,6 +196,7 @@ __all__ = [
     "synthesize_robust",
     "RobustDesign",
     "certify_robust_observer",
+    "certify_robust_observer_discrete",
     "synthesize_robust_observer",
     "RobustObserverCertificate",
     "RobustObserverSynthesis",

@@ -23,6 +23,7 @@ __all__ = [
     "OutputError",
     "SweepError",
     "UsageError",
+    "RequirementFailed",
     "InternalError",
     "TuningWarning",
 ]
@@ -113,6 +114,10 @@ class SweepError(BWDesignError, RuntimeError):
 
 class UsageError(BWDesignError, ValueError):
     """Bad command-line input."""
+
+
+class RequirementFailed(BWDesignError, AssertionError):
+    """A requirement of a stage file does not hold (the pytest plugin's failed item)."""
 
 
 class InternalError(RuntimeError):

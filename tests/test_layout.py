@@ -234,30 +234,16 @@ def _private_imports(path: Path, modules: set[str], root: Path = PKG) -> list[st
     return sorted(set(out))
 
 
-#: Underscore names still taken across modules in the layers being rewritten (sim/, cli/):
-#: to be removed by the ClosedLoop/study change (issue 25), which replaces these modules.
-#: An entry that no longer occurs fails the test, so the list only shrinks.
-PRIVATE_IMPORTS_ALLOWED = {
-    "bwdesign.cli.main": {"bwdesign.cli.args._Parser"},
-}
-
 FILES = {_module_name(p): p for p in PKG.rglob("*.py")}
 
 
 @pytest.mark.parametrize("mod", sorted(FILES))
 def test_no_underscore_name_is_imported_across_modules(mod):
     """A name another module needs is public at home (no leading underscore)."""
-    found = set(_private_imports(FILES[mod], set(FILES)))
-    allowed = PRIVATE_IMPORTS_ALLOWED.get(mod, set())
-    bad = sorted(found - allowed)
+    bad = sorted(set(_private_imports(FILES[mod], set(FILES))))
     assert not bad, f"{mod} takes underscore names from other modules: {bad}; make them public"
-    stale = sorted(allowed - found)
-    assert not stale, f"{mod} no longer imports {stale}: remove them from the allow-list"
 
 
-#: Exception classes defined outside errors.py in the layers being rewritten: to be removed
-#: by the ClosedLoop/study change (issue 25), which replaces bwdesign.testing's plugin.
-EXCEPTIONS_ALLOWED = {"bwdesign.testing.plugin": {"RequirementFailed"}}
 #: Built-ins the package never raises itself: a typed error from errors.py subclasses them.
 PLAIN = {"Exception", "ValueError", "RuntimeError", "TypeError"}
 
@@ -294,11 +280,8 @@ def test_every_exception_class_is_in_errors():
     for mod, tree in trees.items():
         if mod == "bwdesign.errors":
             continue
-        found = set(_exception_classes(tree))
-        bad = sorted(found - EXCEPTIONS_ALLOWED.get(mod, set()))
-        assert not bad, f"{mod} defines {bad}: define them in bwdesign/errors.py (re-export them)"
-        stale = sorted(EXCEPTIONS_ALLOWED.get(mod, set()) - found)
-        assert not stale, f"{mod} no longer defines {stale}: remove them from the allow-list"
+        found = _exception_classes(tree)
+        assert not found, f"{mod} defines {found}: define them in bwdesign/errors.py"
 
 
 def test_moved_exception_classes_stay_importable_where_they_were():
@@ -347,11 +330,6 @@ MAX_PARAMS, MAX_LINES = 10, 120
 LIMITS_ALLOWED: dict[str, set[str]] = {
     # to be removed by the ClosedLoop/study change: sim/, report/, cli/ are being rewritten
     "bwdesign.sim.robust_design.synthesize_robust": {"params", "lines"},
-    # ClosedLoop change: these take the loop (or the observer specification) piece by piece
-    "bwdesign.certify.robust.certify_robust": {"params"},
-    "bwdesign.certify.robust_observer.certify_robust_observer": {"params"},
-    "bwdesign.control.analysis.analyze_loop": {"params"},
-    "bwdesign.control.systems.loop_systems": {"params"},
 }
 
 

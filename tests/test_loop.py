@@ -28,6 +28,14 @@ PAPER_GAINS = (8.0, 64.0, -512.0)
 HOLD = Step(amplitude=0.0, offset=10.0)  # a constant reference: free decay of the loop
 
 
+def lin(p, lambda1, lambda2, gains=PAPER_GAINS, *, dt=None, form="continuous", **kw):
+    """The PHSO on ``gains`` with eq. (12) in ``form`` (``integral_rate``), sampled at ``dt``."""
+    law = make_controller(
+        p, lambda1, lambda2, form=form, dt=dt, integral_rate=kw.pop("integral_rate", None)
+    )
+    return ClosedLoop(p, ObserverSpec.of("phso", gains), law, dt=dt, **kw)
+
+
 def loop(p, observer, gains, lambda1, lambda2, *, form="continuous", jump=False, **kw):
     """``observer`` on ``gains`` with eq. (12) in ``form``, sampled at DT."""
     law = make_controller(p, lambda1, lambda2, form=form, dt=DT, hysteresis_jump=jump)
@@ -44,7 +52,7 @@ def test_continuous_loop_separates(usable_plant):
     """Exact model: poles = {-lambda1, -lambda2} and the observer's (separation principle)."""
     p = usable_plant
     gains = PAPER_GAINS if p.name == "paper_experiment" else (80.0, 160.0, -640.0)
-    a = analyze_loop(p, 3.0, 70.0, gains)
+    a = analyze_loop(lin(p, 3.0, 70.0, gains))
     want = np.concatenate([[-3.0, -70.0], np.linalg.eigvals(error_matrix(p, gains))])
     assert np.allclose(np.poly(a.poles), np.poly(want), rtol=1e-7)
     assert a.stable and a.spectral_radius is None
@@ -53,7 +61,7 @@ def test_continuous_loop_separates(usable_plant):
 
 def test_sampled_discrete_form_places_poles(experiment):
     g = observer_gains(experiment, [-1000.0] * 3)
-    a = analyze_loop(experiment, 50.0, 400.0, g, dt=DT, form="discrete")
+    a = analyze_loop(lin(experiment, 50.0, 400.0, g, dt=DT, form="discrete"))
     zobs = np.linalg.eigvals(
         (np.eye(3) - np.outer(discrete_gains(experiment, g, DT), [1, 0, 0]))
         @ discretize(experiment, DT).F
@@ -65,7 +73,7 @@ def test_sampled_discrete_form_places_poles(experiment):
 
 def test_paper_constants_sampled_poles(experiment):
     """eq. (12) as printed at 0.2 ms: the designed -1, -2 1/s become about -0.104 and -18."""
-    a = analyze_loop(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT)
+    a = analyze_loop(lin(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT))
     s = np.sort(a.poles_s.real)[::-1]
     assert a.stable
     assert s[0] == pytest.approx(-0.1039, rel=1e-3)
@@ -79,7 +87,7 @@ def test_paper_constants_sampled_poles(experiment):
 def test_sampled_poles_match_simulated_decay(experiment):
     """The slowest pole of the analysis is the decay rate of the simulated tracking error."""
     g = tuple(observer_gains(experiment, [-1000.0] * 3))
-    a = analyze_loop(experiment, 50.0, 400.0, g, dt=DT, form="discrete")
+    a = analyze_loop(lin(experiment, 50.0, 400.0, g, dt=DT, form="discrete"))
     lp = loop(experiment, "phso", g, 50.0, 400.0, form="discrete", start=Start(xhat0=(2, 0, 0)))
     r = simulate(lp, HOLD, duration=0.13)
     assert decay_rate(r, 0.04, 0.12) == pytest.approx(a.slowest_decay_rate, rel=0.01)
@@ -92,7 +100,7 @@ def test_paper_constants_decay_matches_analysis_not_design(experiment):
     The linear analysis holds x3; the law cancels the post-jump hysteresis
     estimate only with ``hysteresis_jump=True``, and then the match is exact.
     """
-    a = analyze_loop(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT)
+    a = analyze_loop(lin(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT))
     lp = loop(experiment, "phso", PAPER_GAINS, 1.0, 2.0, jump=True, start=Start(xhat0=(2, 0, 0)))
     r = simulate(lp, HOLD, duration=20.01)
     rate = decay_rate(r, 8.0, 20.0)
@@ -104,7 +112,7 @@ def test_steady_state_error_matches_tracking_gain(experiment):
     """abs(E/X_d) of the analysis = the simulated error amplitude of the Table 2 sine."""
     from bwdesign import Sine
 
-    a = analyze_loop(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT)
+    a = analyze_loop(lin(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT))
     lp = loop(experiment, "phso", PAPER_GAINS, 1.0, 2.0, start=Start(x0=(100.0, 0.0, 0.0)))
     r = simulate(lp, Sine(amplitude=80.0, offset=100.0, frequency=1.0), duration=70.0)
     amp = 0.5 * np.ptp(r.e[r.t >= 68.0])
@@ -120,7 +128,7 @@ def test_gain_margin_matches_simulation(experiment):
     there the linear analysis is conservative.)
     """
     p = experiment.replace(alpha=1e-9)
-    a = analyze_loop(p, 1.0, 2.0, PAPER_GAINS, dt=DT)
+    a = analyze_loop(lin(p, 1.0, 2.0, PAPER_GAINS, dt=DT))
     k_max = a.gain_margin[1]
     assert 1.3 < k_max < 1.6
     swings = {}
@@ -135,7 +143,7 @@ def test_gain_margin_matches_simulation(experiment):
 def test_phase_margin_cross_check(experiment):
     """python-control's phase margin against a dense evaluation of the loop transfer."""
     g = tuple(observer_gains(experiment, [-1000.0] * 3))
-    a = analyze_loop(experiment, 240.0, 240.0, g, dt=DT, form="discrete", integral_rate=120.0)
+    a = analyze_loop(lin(experiment, 240.0, 240.0, g, dt=DT, form="discrete", integral_rate=120.0))
     w = np.geomspace(1.0, math.pi / DT, 100_000)
     L = np.squeeze(a.systems.loop(np.exp(1j * w * DT)))
     i = np.flatnonzero(np.diff(np.sign(np.abs(L) - 1.0)))
@@ -149,14 +157,14 @@ def test_phase_margin_cross_check(experiment):
 def test_a1_mismatch_state_feedback_vs_observer(experiment):
     """With true states an a1 error of -lambda1 lambda2/a1 removes the loop's stiffness;
     with the observer in the loop the x3 estimate absorbs it."""
-    lo, _ = stability_interval(experiment, 1.0, 2.0, estimator="state")
+    lo, _ = stability_interval(lin(experiment, 1.0, 2.0), estimator="state")
     assert lo == pytest.approx(-2.0 / experiment.a1, rel=0.01)
-    lo_obs, hi_obs = stability_interval(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT)
+    lo_obs, hi_obs = stability_interval(lin(experiment, 1.0, 2.0, dt=DT))
     assert lo_obs < -0.2 and hi_obs > 1.0
-    sw = mismatch_sweep(experiment, 1.0, 2.0, PAPER_GAINS, dt=DT, deltas=[-0.05, 0.0, 0.05])
+    sw = mismatch_sweep(lin(experiment, 1.0, 2.0, dt=DT), deltas=[-0.05, 0.0, 0.05])
     assert sw.stable.all()
     assert np.allclose(sw.max_real_part, sw.max_real_part[1], rtol=0.01)
-    sws = mismatch_sweep(experiment, 1.0, 2.0, None, dt=DT, deltas=[-1e-3], estimator="state")
+    sws = mismatch_sweep(lin(experiment, 1.0, 2.0, dt=DT), deltas=[-1e-3], estimator="state")
     assert not sws.stable[0]
     json.dumps(json_safe(sw.to_dict()))
 
@@ -164,8 +172,8 @@ def test_a1_mismatch_state_feedback_vs_observer(experiment):
 def test_delay_lowers_phase_margin(experiment):
     g = tuple(observer_gains(experiment, [-1000.0] * 3))
     kw = dict(dt=DT, form="discrete")
-    a0 = analyze_loop(experiment, 500.0, 500.0, g, **kw)
-    a1 = analyze_loop(experiment, 500.0, 500.0, g, delay=True, compensate_delay=False, **kw)
+    a0 = analyze_loop(lin(experiment, 500.0, 500.0, g, **kw))
+    a1 = analyze_loop(lin(experiment, 500.0, 500.0, g, delay=True, compensate_delay=False, **kw))
     assert a1.phase_margin < a0.phase_margin
 
 
@@ -209,28 +217,34 @@ def test_observer_gains_place_poles(usable_plant):
 
 
 BAD = [
-    ("discrete without dt", dict(form="discrete"), "need a sample time"),
-    ("delay without dt", dict(delay=True), "need a sample time"),
-    ("unknown form", dict(form="zoh"), "form must be"),
-    ("unknown estimator", dict(estimator="kalman"), "estimator must be"),
-    ("negative dt", dict(dt=-1.0), r"dt \(s\) = -1 is outside"),
-    ("bad gains", dict(gains=(1.0, 2.0)), "three numbers"),
+    ("discrete without dt", lambda p: lin(p, 1, 2, form="discrete"), "dt"),
+    ("delay without dt", lambda p: analyze_loop(lin(p, 1, 2, delay=True)), "needs a sample time"),
+    ("unknown form", lambda p: lin(p, 1, 2, form="zoh"), "form must be"),
+    ("unknown estimator", lambda p: analyze_loop(lin(p, 1, 2), estimator="kalman"), "estimator"),
+    ("negative dt", lambda p: lin(p, 1, 2, dt=-1.0), r"dt \(s\) = -1 is outside"),
+    ("bad gains", lambda p: lin(p, 1, 2, (1.0, 2.0)), "3 gains|three numbers"),
+    ("not a loop", lambda p: analyze_loop(p), "must be a ClosedLoop"),
+    (
+        "the PHDO",
+        lambda p: analyze_loop(
+            ClosedLoop(p, ObserverSpec.of("phdo", PAPER_GAINS), make_controller(p, 1, 2))
+        ),
+        "covers the PHSO and the ESO",
+    ),
 ]
 
 
-@pytest.mark.parametrize("label, kw, match", BAD, ids=[b[0] for b in BAD])
-def test_bad_inputs(experiment, label, kw, match):
-    kw = dict(kw)
-    gains = kw.pop("gains", PAPER_GAINS)
+@pytest.mark.parametrize("label, make, match", BAD, ids=[b[0] for b in BAD])
+def test_bad_inputs(experiment, label, make, match):
     with pytest.raises(ValueError, match=match):
-        analyze_loop(experiment, 1.0, 2.0, gains, **kw)
+        make(experiment)
 
 
 def test_bad_sweep_and_poles(experiment):
     with pytest.raises(InputError, match="a1, a2, a3"):
-        mismatch_sweep(experiment, 1.0, 2.0, PAPER_GAINS, parameter="alpha")
+        mismatch_sweep(lin(experiment, 1.0, 2.0), parameter="alpha")
     with pytest.raises(InputError, match="> -1"):
-        mismatch_sweep(experiment, 1.0, 2.0, PAPER_GAINS, deltas=[-1.5])
+        mismatch_sweep(lin(experiment, 1.0, 2.0), deltas=[-1.5])
     with pytest.raises(InputError, match="negative real parts"):
         observer_gains(experiment, [-1.0, 2.0, -3.0])
     with pytest.raises(InputError, match="self-conjugate"):

@@ -41,17 +41,9 @@ def _worst_simulated(params, box, *, noise_std=0.0, duration=3.0):
 
 
 def _certify(params, box, **kw):
-    return certify_robust(
-        params,
-        GAINS,
-        dt=DT,
-        uncertainty=box,
-        udot_max=UDOT,
-        reference=REF,
-        delay=True,
-        **LOOP,
-        **kw,
-    )
+    ctrl = make_controller(params, form="discrete", dt=DT, **LOOP)
+    loop = ClosedLoop(params, ObserverSpec.of("phso", GAINS), ctrl, dt=DT, delay=True)
+    return certify_robust(loop, uncertainty=box, udot_max=UDOT, reference=REF, **kw)
 
 
 def test_robust_bound_covers_brute_force_vertices_on_a_custom_stage():

@@ -9,12 +9,14 @@ from bwdesign import (
     HysteresisObserver,
     UncertaintyBox,
     certify_robust_observer,
+    certify_robust_observer_discrete,
     preset,
     synthesize_robust_observer,
 )
 from bwdesign.certify.checks import rho_interval
 from bwdesign.errors import GainError, InputError, ParameterError
 from bwdesign.model.plant import discretize, hysteresis_increment, zoh_step
+from bwdesign.observers.gains import discrete_gains
 
 DT = 2e-4
 GAINS = (786.2, 28982.94, -782.0931942250238)  # the paper stage's digital tuning
@@ -211,9 +213,25 @@ def test_bad_input_is_refused():
         _cert(p, {"a1": {"rel": float("inf")}})
     with pytest.raises(GainError):
         certify_robust_observer(
-            p, dt=DT, uncertainty=UncertaintyBox.from_dict(SMALL), udot_max=UDOT,
+            p, None, dt=DT, uncertainty=UncertaintyBox.from_dict(SMALL), udot_max=UDOT,
             input_range=RANGE,
         )  # fmt: skip
+    with pytest.raises(GainError, match="discrete gains K"):
+        certify_robust_observer_discrete(
+            p, (1.0, 2.0), dt=DT, uncertainty=UncertaintyBox.from_dict(SMALL), udot_max=UDOT,
+            input_range=RANGE,
+        )  # fmt: skip
+
+
+def test_the_discrete_gain_certifies_as_its_continuous_gains_do():
+    p = _custom()
+    box = UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
+    kw = dict(dt=DT, uncertainty=box, udot_max=UDOT, input_range=RANGE, interior_samples=2)
+    given = certify_robust_observer(p, GAINS, a=0.97, **kw)
+    K = discrete_gains(p, GAINS, DT)
+    direct = certify_robust_observer_discrete(p, K, a=0.97, **kw)
+    assert given.holds and direct.holds
+    assert direct.estimation_bound == given.estimation_bound
 
 
 @pytest.mark.parametrize("target", ["x3", "x1"])

@@ -26,6 +26,7 @@ from bwdesign import (
     preset,
 )
 from bwdesign.control.controllers import make_controller
+from bwdesign.control.loop import ON_REFERENCE
 from bwdesign.errors import InputError
 from bwdesign.model.reference_cover import SIGMA, sup_abs
 from bwdesign.model.references import Reference
@@ -122,9 +123,9 @@ def _loop_rows():
     robust.sup_abs = spy
     try:
         certify_robust(
-            preset("paper_experiment"), GAINS, dt=DT, uncertainty=UncertaintyBox.from_dict(
+            _loop(preset("paper_experiment")), uncertainty=UncertaintyBox.from_dict(
                 {"a3": {"rel": 0.02}}), udot_max=500.0, reference=Sine(amplitude=80.0,
-            offset=100.0, frequency=1.0), delay=True, interior_samples=0, **LOOP,
+            offset=100.0, frequency=1.0), interior_samples=0,
         )  # fmt: skip
     except RuntimeError:
         pass
@@ -179,17 +180,18 @@ def test_a_reference_that_neither_repeats_nor_settles_is_refused():
         sup_abs(Drifting(amplitude=1.0, t0=0.0, T=1.0), 1e-3, np.ones((1, 9)))
 
 
+def _loop(params, start=ON_REFERENCE):
+    ctrl = make_controller(params, form="discrete", dt=DT, **LOOP)
+    return ClosedLoop(params, ObserverSpec.of("phso", GAINS), ctrl, dt=DT, delay=True, start=start)
+
+
 def _certify(params, box, ref, **kw):
-    return certify_robust(
-        params, GAINS, dt=DT, uncertainty=box, udot_max=kw.pop("udot_max", 600.0),
-        reference=ref, delay=True, **LOOP, **kw,
-    )  # fmt: skip
+    udot_max = kw.pop("udot_max", 600.0)
+    return certify_robust(_loop(params), uncertainty=box, udot_max=udot_max, reference=ref, **kw)
 
 
 def _corners(params, box, ref, duration):
-    ctrl = make_controller(params, form="discrete", dt=DT, **LOOP)
-    start = Start.on_reference(params, ref)
-    loop = ClosedLoop(params, ObserverSpec.of("phso", GAINS), ctrl, dt=DT, delay=True, start=start)
+    loop = _loop(params, Start.on_reference(params, ref))
     res = simulate_batch(loop, ref, box.vertices(params), duration=duration, window=(0.5, duration))
     assert res.stable.all()
     return res
@@ -225,7 +227,6 @@ def test_the_reports_loop_on_the_stack_stage_with_a_late_step(observer):
     delay), the stage's own 64-corner box, a 0 -> 15 um step at 3 s with a 0.5 s rise,
     the envelope by the stage's rule. Before: x3 bound 0.0898 (PHDO) / 0.0702 (PHSO)
     against 0.675 simulated after the step."""
-    from bwdesign.control.loop import ON_REFERENCE
     from bwdesign.control.tuning import digital_tuning
     from bwdesign.model.config import load_config
     from bwdesign.model.envelope import derive_envelope
@@ -240,17 +241,13 @@ def test_the_reports_loop_on_the_stack_stage_with_a_late_step(observer):
     ctrl = make_controller(p, form="discrete", dt=dt, **loop)
     spec = ObserverSpec.of(observer, tun.gains)
     assert spec.gains == gains
-    sim = simulate_corners(
-        ClosedLoop(p, spec, ctrl, dt=dt, delay=tun.delay, start=ON_REFERENCE), box, ref
-    )
+    cl = ClosedLoop(p, spec, ctrl, dt=dt, delay=tun.delay, start=ON_REFERENCE)
+    sim = simulate_corners(cl, box, ref)
     # the statistics from the step's first move on (to 1 s after it has settled)
     assert sim.window[0] <= ref.t_step < ref.settles_at < sim.window[1]
     env = derive_envelope(p, ref, margin=1.1).udot_max
     assert np.max(sim.input_rate_max) <= env
-    rc = certify_robust(
-        p, gains, dt=dt, uncertainty=box, udot_max=env, reference=ref, delay=tun.delay,
-        observer=observer, **loop,
-    )  # fmt: skip
+    rc = certify_robust(cl, uncertainty=box, udot_max=env, reference=ref)
     assert rc.holds, rc.status
     assert rc.tracking_bound >= np.max(sim.maxe)
     assert rc.estimation_bound >= np.nanmax(sim.estimation_maxe[:, 0])

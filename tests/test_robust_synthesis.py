@@ -192,17 +192,10 @@ def test_phdo_robust_certificate_needs_the_tunings_split():
     from bwdesign import certify_robust
 
     with pytest.raises(InputError, match="l3 = 0"):
-        certify_robust(
-            p,
-            (786.2, 28982.94, -100.0, -682.09),
-            dt=DT,
-            uncertainty=_box(a3=0.02),
-            udot_max=UDOT,
-            reference=REF,
-            lambda1=250.0,
-            lambda2=250.0,
-            observer="phdo",
-        )
+        ctrl = make_controller(p, 250.0, 250.0, form="discrete", dt=DT)
+        spec = ObserverSpec.of("phdo", (786.2, 28982.94, -100.0, -682.09))
+        loop = ClosedLoop(p, spec, ctrl, dt=DT)
+        certify_robust(loop, uncertainty=_box(a3=0.02), udot_max=UDOT, reference=REF)
     with pytest.raises(InputError, match="observer"):
         synthesize_robust(
             p, dt=DT, uncertainty=_box(a3=0.02), udot_max=UDOT, reference=REF, observer="ukf"
@@ -218,20 +211,10 @@ def test_phdo_robust_loop_covers_brute_force_corners_on_a_custom_stage():
     box = _box(a1=0.02, a3=0.03, beta=0.1)
     gains = disturbance_gains_from((786.2, 28982.94, -782.0931942250238))
     loop = {"lambda1": 250.0, "lambda2": 250.0, "integral_rate": 125.0}
-    rc = certify_robust(
-        p,
-        gains,
-        dt=DT,
-        uncertainty=box,
-        udot_max=UDOT,
-        reference=REF,
-        delay=True,
-        observer="phdo",
-        interior_samples=4,
-        **loop,
-    )
-    assert rc.holds, rc.status
     ctrl = make_controller(p, form="discrete", dt=DT, **loop)
+    cl = ClosedLoop(p, ObserverSpec("phdo", gains), ctrl, dt=DT, delay=True)
+    rc = certify_robust(cl, uncertainty=box, udot_max=UDOT, reference=REF, interior_samples=4)
+    assert rc.holds, rc.status
     rng = np.random.default_rng(3)
     plants = box.vertices(p) + box.sample(p, rng, 4)
     spec = ObserverSpec("phdo", gains)

@@ -24,6 +24,7 @@ from .robust_observer import (
     RobustObserverCertificate,
     RobustObserverSynthesis,
     certify_robust_observer,
+    certify_robust_observer_discrete,
     synthesize_robust_observer,
 )
 from .synthesis import default_pole_radius, synthesize
@@ -43,6 +44,7 @@ __all__ = [
     "certify_robust",
     "RobustCertificate",
     "certify_robust_observer",
+    "certify_robust_observer_discrete",
     "synthesize_robust_observer",
     "RobustObserverCertificate",
     "RobustObserverSynthesis",

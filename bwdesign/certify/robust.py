@@ -97,21 +97,21 @@ recomputed from ``P`` with numpy. Solver trouble is a status, never a certificat
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from scipy.linalg import matrix_balance, solve_discrete_lyapunov
 
-from ..control.controllers import TuningWarning, make_controller
+from ..control.controllers import DiscreteTrackingController
+from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import check_sample_time, discretize
+from ..model.plant import discretize
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import check_disturbance_gains, check_gains, discrete_gains
+from ..observers.gains import check_gains, discrete_gains
 from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction, solution
@@ -255,33 +255,30 @@ def _hyst_bounds(model: BoucWenParams, tp: BoucWenParams, du: float) -> tuple[fl
 
 
 def certify_robust(
-    params: BoucWenParams,
-    gains: Any,
+    loop: ClosedLoop,
     *,
-    dt: float,
     uncertainty: UncertaintyBox,
     udot_max: float,
     reference: Reference,
-    lambda1: float,
-    lambda2: float,
-    integral_rate: float | None = None,
-    delay: bool = False,
     noise_max: float = 0.0,
     a: float | None = None,
     interior_samples: int = 16,
     seed: int = 0,
-    observer: str = "phso",
 ) -> RobustCertificate:
-    """Certify the sampled PHSO (or PHDO) tracking loop over every plant in an uncertainty box.
+    """Certify a sampled PHSO (or PHDO) tracking loop over every plant in an uncertainty box.
 
     Parameters
     ----------
-    params : BoucWenParams
-        The model (observer and controller).
-    gains : sequence of 3 (PHSO) or 4 (PHDO) floats
-        Continuous observer gains (pole-matched to ``K`` as the observer runs them).
-    dt : float
-        Sample time (s).
+    loop : ClosedLoop
+        The loop certified: its ``model`` (observer and law), its observer (``"phso"``,
+        or ``"phdo"`` with ``l3 = 0``; continuous gains, pole-matched to ``K`` as the
+        observer runs them), its discrete eq. (12) law
+        (:class:`~bwdesign.control.controllers.DiscreteTrackingController` at the
+        loop's ``dt``, built on ``model``, with or without integral action, without
+        the hysteresis jump), its ``dt`` and its one-sample delay (compensated, as the
+        digital tuning). The certificate covers the loop *without* its input limits
+        and estimate clipping: a saturating loop is certified only while it does not
+        saturate.
     uncertainty : UncertaintyBox
         The box of true plants: finite, every corner a bounded plant
         (:meth:`UncertaintyBox.check`; ``ParameterError`` otherwise).
@@ -294,10 +291,6 @@ def certify_robust(
         :func:`bwdesign.model.reference_cover.sup_abs`: an upper bound, not a window's
         maximum. A reference that states neither a period nor a settling time, or not
         its breakpoints and derivative bounds, is refused (``InputError``).
-    lambda1, lambda2, integral_rate : float
-        Discrete eq. (12) constants (1/s), as :func:`bwdesign.control.controllers.make_controller`.
-    delay : bool
-        The one-sample computation delay with compensation (as the digital tuning).
     noise_max : float
         Sensor noise bound ``|n| <= noise_max`` (length unit).
     a : float, optional
@@ -306,32 +299,39 @@ def certify_robust(
     interior_samples : int
         Seeded interior points of the box where the same ``P`` is re-checked.
     seed : int
-    observer : {"phso", "phdo"}
-        ``"phdo"``: the disturbance observer with ``l3 = 0`` (the digital tuning's
-        :func:`~bwdesign.observers.gains.disturbance_gains_from`), whose law uses the
-        lumped ``x3hat + dhat``. Its hysteresis copy then runs on the model alone, so
-        ``|x3hat - x3| <= h_max(model) + h_max(plant)`` for every input, and the
-        lumped error ``(e1, e2, e3 + ed)`` is the PHSO's error system with ``rho = 1``
-        driven by the extra input ``(rho - 1) e3``, bounded by
-        ``(1 - rho_lo)(h_max(model) + h_max(plant))``; that is what is certified,
-        and ``x3_estimation_bound`` bounds the lumped ``|x3hat + dhat - x3|``.
 
     Returns
     -------
     RobustCertificate
+
+    Raises
+    ------
+    InputError
+        A loop this certificate does not cover (another observer, a continuous or
+        foreign law, an uncompensated delay, the hysteresis jump), a bad reference or
+        envelope.
+
+    Notes
+    -----
+    The PHDO with ``l3 = 0`` (the digital tuning's
+    :func:`~bwdesign.observers.gains.disturbance_gains_from`) uses the lumped
+    ``x3hat + dhat``. Its hysteresis copy runs on the model alone, so
+    ``|x3hat - x3| <= h_max(model) + h_max(plant)`` for every input, and the lumped
+    error ``(e1, e2, e3 + ed)`` is the PHSO's error system with ``rho = 1`` driven by
+    the extra input ``(rho - 1) e3``, bounded by ``(1 - rho_lo)(h_max(model) +
+    h_max(plant))``; that is what is certified, and ``x3_estimation_bound`` bounds the
+    lumped ``|x3hat + dhat - x3|``.
     """
-    require_bounded(params)
-    dt = check_sample_time(params, dt)
+    lp, observer = _loop(loop)
+    params = loop.model
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
     noise_max = real(noise_max, "noise_max", within=NONNEGATIVE)
     if not isinstance(uncertainty, UncertaintyBox):
         raise InputError("uncertainty must be an UncertaintyBox")
     if not isinstance(reference, Reference):
         raise InputError(f"reference must be a bwdesign Reference, got {reference!r}")
-    below_nyquist(reference, dt)
-    require_coverable(reference, dt)
-    l = _observer_gains(params, gains, observer)
-    lp = _loop(params, l, dt, lambda1, lambda2, integral_rate, delay)
+    below_nyquist(reference, lp.dt)
+    require_coverable(reference, lp.dt)
     uncertainty.check(params)  # every corner (so every plant in the box) bounded
     vertices = uncertainty.vertices(params)
     rng = np.random.default_rng(seed)
@@ -359,7 +359,7 @@ def certify_robust(
         why = f"no common Lyapunov function over the {len(vertices)} corners and {rho} ({status})"
         details = {"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []}
         return _not_certified(base, why, av, details, sol.solver if sol is not None else "")
-    return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, dt, base)
+    return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, lp.dt, base)
 
 
 def _not_certified(
@@ -379,49 +379,54 @@ def _not_certified(
     )
 
 
-def _observer_gains(params: BoucWenParams, gains: Any, observer: str) -> np.ndarray:
-    """The 3-state gains the certified loop runs (the PHDO's lumped ``(l1, l2, l3 + l4)``)."""
-    if observer not in ("phso", "phdo"):
-        raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
-    if observer == "phdo":
-        l4 = check_disturbance_gains(params, gains)
+def _loop(loop: ClosedLoop) -> tuple[_Loop, str]:
+    """The certified loop's matrices: ZOH model, discrete observer gain, eq. (12) law."""
+    if not isinstance(loop, ClosedLoop):
+        raise InputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    params, obs, ctrl = loop.model, loop.observer, loop.controller
+    require_bounded(params)
+    if obs.kind not in ("phso", "phdo"):
+        raise InputError(
+            f"the robust loop certificate covers the PHSO and the PHDO, not {obs.kind!r}"
+        )
+    if not isinstance(ctrl, DiscreteTrackingController) or loop.dt is None:
+        raise InputError(
+            "the robust loop certificate needs the discrete eq. (12) law "
+            "(DiscreteTrackingController) at the loop's dt"
+        )
+    if ctrl.params != params:
+        raise InputError("the loop's law must be built on the loop's model")
+    if ctrl.hysteresis_jump:
+        raise InputError("the robust loop certificate does not cover the hysteresis jump")
+    if loop.delay and not loop.compensate_delay:
+        raise InputError(
+            "the robust loop certificate covers the one-sample delay compensated only "
+            "(compensate_delay=True)"
+        )
+    if obs.kind == "phdo":
+        l4 = np.asarray(obs.gains, float)
         if l4[2] != 0:
             raise InputError(
                 "the robust loop certificate of the PHDO needs l3 = 0 (the hysteresis copy on "
                 f"the model alone, as the digital tuning splits it), got l3 = {l4[2]:g}"
             )
-        return check_gains(params, (l4[0], l4[1], l4[2] + l4[3]))
-    return check_gains(params, gains)
-
-
-def _loop(
-    params: BoucWenParams,
-    l: np.ndarray,
-    dt: float,
-    lambda1: float,
-    lambda2: float,
-    integral_rate: float | None,
-    delay: bool,
-) -> _Loop:
-    """The model's sampled loop: ZOH matrices, the discrete observer gain and the eq. (12) law."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", TuningWarning)
-        ctrl = make_controller(
-            params, lambda1, lambda2, form="discrete", dt=dt, integral_rate=integral_rate
-        )
+        l = check_gains(params, (l4[0], l4[1], l4[2] + l4[3]))
+    else:
+        l = check_gains(params, obs.gains)
     Kx, Kr = ctrl.linear_gains()
-    zm = discretize(params, dt)
-    return _Loop(
+    zm = discretize(params, loop.dt)
+    lp = _Loop(
         Fm=np.asarray(zm.F),
         gm=np.asarray(zm.g),
-        K=discrete_gains(params, l, dt),
+        K=discrete_gains(params, l, loop.dt),
         Kx=np.asarray(Kx, float),
         Kr=np.asarray(Kr, float),
         ki=float(ctrl.ki),
-        dt=dt,
+        dt=float(loop.dt),
         integral=ctrl.integral_rate is not None,
-        delay=bool(delay),
+        delay=loop.delay,
     )
+    return lp, obs.kind
 
 
 @dataclass(frozen=True)

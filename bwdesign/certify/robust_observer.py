@@ -76,6 +76,7 @@ __all__ = [
     "RobustObserverCertificate",
     "RobustObserverSynthesis",
     "certify_robust_observer",
+    "certify_robust_observer_discrete",
     "synthesize_robust_observer",
 ]
 
@@ -473,7 +474,7 @@ def _certify_K(pb: _Problem, K: np.ndarray, a: float | None) -> RobustObserverCe
 
 def certify_robust_observer(
     params: BoucWenParams,
-    gains: Any = None,
+    gains: Any,
     *,
     dt: float,
     uncertainty: UncertaintyBox,
@@ -482,7 +483,6 @@ def certify_robust_observer(
     noise_max: float = 0.0,
     interior_samples: int = 16,
     seed: int = 0,
-    discrete: Any = None,
     a: float | None = None,
 ) -> RobustObserverCertificate:
     """Certify the sampled PHSO's estimation error over every plant in an uncertainty box.
@@ -491,8 +491,9 @@ def certify_robust_observer(
     ----------
     params : BoucWenParams
         The model the observer runs.
-    gains : sequence of 3 floats, optional
-        Continuous observer gains (pole-matched to ``K`` as the observer runs them).
+    gains : sequence of 3 floats
+        Continuous observer gains (pole-matched to ``K`` as the observer runs them);
+        :func:`certify_robust_observer_discrete` takes ``K`` itself.
     dt : float
         Sample time (s).
     uncertainty : UncertaintyBox
@@ -506,8 +507,6 @@ def certify_robust_observer(
     interior_samples : int
         Seeded interior points of the box whose input bounds are included.
     seed : int
-    discrete : sequence of 3 floats, optional
-        The discrete gain ``K`` instead of ``gains`` (exactly one of the two).
     a : float, optional
         Contraction per sample in ``(0, 1)``; default: searched for the smallest x1 bound.
 
@@ -516,23 +515,35 @@ def certify_robust_observer(
     RobustObserverCertificate
     """
     dt = check_sample_time(params, dt)
-    if (gains is None) == (discrete is None):
-        raise GainError("give either continuous gains (l1, l2, l3) or discrete=K, exactly one")
-    if discrete is None:
-        K = discrete_gains(params, check_gains(params, gains), dt)
-    else:
-        K = np.asarray(as_gains(discrete, "discrete gains K"), float)
-    pb = _problem(
-        params,
-        dt=dt,
-        uncertainty=uncertainty,
-        udot_max=udot_max,
-        input_range=input_range,
-        noise_max=noise_max,
-        interior_samples=interior_samples,
-        seed=seed,
-    )
-    return _certify_K(pb, np.asarray(K, float), a)
+    K = discrete_gains(params, check_gains(params, gains), dt)
+    opts = {"dt": dt, "uncertainty": uncertainty, "udot_max": udot_max, "input_range": input_range}
+    return _certify_K(_problem(params, noise_max=noise_max, interior_samples=interior_samples,
+                               seed=seed, **opts), np.asarray(K, float), a)  # fmt: skip
+
+
+def certify_robust_observer_discrete(
+    params: BoucWenParams,
+    K: Any,
+    *,
+    dt: float,
+    uncertainty: UncertaintyBox,
+    udot_max: float,
+    input_range: tuple[float, float],
+    noise_max: float = 0.0,
+    interior_samples: int = 16,
+    seed: int = 0,
+    a: float | None = None,
+) -> RobustObserverCertificate:
+    """:func:`certify_robust_observer` of the discrete gain ``K`` itself (as ``certify_discrete``).
+
+    For a design whose discrete poles have no continuous equivalent (a synthesis in the
+    z-plane). ``K`` is the predict/update gain; the other parameters as there.
+    """
+    dt = check_sample_time(params, dt)
+    K = np.asarray(as_gains(K, "discrete gains K"), float)
+    opts = {"dt": dt, "uncertainty": uncertainty, "udot_max": udot_max, "input_range": input_range}
+    return _certify_K(_problem(params, noise_max=noise_max, interior_samples=interior_samples,
+                               seed=seed, **opts), K, a)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -606,7 +617,7 @@ def synthesize_robust_observer(
     negative real axis, so the exact continuous equivalent of ``K`` exists). ``K`` is
     rounded to 10 significant digits and re-certified by
     :func:`certify_robust_observer` (with the continuous equivalent when it exists,
-    else with ``discrete=K``) before it is called feasible.
+    else :func:`certify_robust_observer_discrete` of ``K``) before it is called feasible.
 
     Parameters
     ----------
@@ -722,7 +733,7 @@ def _recertify(
     """``(continuous gains or None, certificate, note)`` of the rounded synthesised ``K``.
 
     Certified with its exact continuous equivalent when one exists and is admissible,
-    else with ``discrete=K``.
+    else with :func:`certify_robust_observer_discrete`.
     """
     with warnings.catch_warnings():  # logm's accuracy note: the result is verified anyway
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -731,10 +742,10 @@ def _recertify(
         if gains is not None:
             cert = certify_robust_observer(params, gains, **opts)
         else:
-            cert = certify_robust_observer(params, discrete=K, **opts)
+            cert = certify_robust_observer_discrete(params, K, **opts)
     except GainError as err:  # continuous equivalent outside the Hurwitz conditions (4)
         gains = None
-        cert = certify_robust_observer(params, discrete=K, **opts)
+        cert = certify_robust_observer_discrete(params, K, **opts)
         note = f" (its continuous equivalent is not admissible: {err})"
     else:
         note = (

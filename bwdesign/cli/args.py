@@ -43,7 +43,7 @@ def join_negative_values(argv: Sequence[str]) -> list[str]:
     return out
 
 
-class _Parser(argparse.ArgumentParser):
+class Parser(argparse.ArgumentParser):
     """argparse with the package's error convention: one ``error:`` line, exit 2."""
 
     def error(self, message: str) -> NoReturn:

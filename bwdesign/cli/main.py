@@ -24,7 +24,7 @@ from .args import (
     EXIT_BAD_INPUT,
     EXIT_INTERRUPTED,
     EXIT_NO,
-    _Parser,
+    Parser,
     add_plant_args,
 )
 
@@ -133,9 +133,9 @@ COMMANDS: list[Command] = [
 def build_parser() -> argparse.ArgumentParser:
     from .._version import __version__  # importlib.metadata: not before main() runs
 
-    parser = _Parser(prog="bwdesign", description=__doc__.splitlines()[0])
+    parser = Parser(prog="bwdesign", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"bwdesign {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=_Parser)
+    sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=Parser)
     sub.required = True
     for name, help_text, add_args, run in COMMANDS:
         p = sub.add_parser(name, help=help_text, description=help_text)

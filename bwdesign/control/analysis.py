@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..observers.gains import as_gains
+from .loop import ClosedLoop
 from .systems import LoopSystems, gain_interval, loop_systems, stability
 
 __all__ = ["LoopAnalysis", "MismatchSweep", "analyze_loop", "mismatch_sweep", "stability_interval"]
@@ -134,48 +134,31 @@ class LoopAnalysis:
 
 
 def analyze_loop(
-    params: BoucWenParams,
-    lambda1: float,
-    lambda2: float,
-    gains: Any = None,
+    loop: ClosedLoop,
     *,
-    dt: float | None = None,
-    form: str = "continuous",
-    integral_rate: float | None = None,
     true_params: BoucWenParams | None = None,
     estimator: str = "observer",
-    delay: bool = False,
-    compensate_delay: bool = True,
 ) -> LoopAnalysis:
     """Closed-loop poles and stability margins of the linear tracking loop.
 
     Parameters
     ----------
-    params : BoucWenParams
-        The model used by the observer and the controller.
-    lambda1, lambda2 : float
-        Eq. (12) constants (1/s).
-    gains : array_like, shape (3,)
-        Continuous observer gains (l1 1/s, l2 1/s^2, l3 1/s); mapped to the
-        discrete correction by :func:`bwdesign.observers.discrete_gains` when
-        ``dt`` is given. Not used with ``estimator="state"``.
-    dt : float, optional
-        Sample time (s): analyse the sampled loop (exact ZOH plant, discrete
-        observer, law evaluated at the samples and held).
-    form : {"continuous", "discrete"}
-        Eq. (12) as printed, or its sampled form (needs ``dt``).
-    integral_rate : float, optional
-        Integral action of the discrete form (1/s), see
-        :class:`bwdesign.control.controllers.DiscreteTrackingController`.
+    loop : ClosedLoop
+        The loop analysed: its ``model`` (observer and law), its observer's continuous
+        gains (PHSO or ESO; mapped to the discrete correction by
+        :func:`bwdesign.observers.discrete_gains` when the loop has a ``dt``), its
+        eq. (12) law (continuous, or
+        :class:`~bwdesign.control.controllers.DiscreteTrackingController` with its
+        integral action), its ``dt`` (``None``: the continuous loop; else the sampled
+        loop, exact ZOH plant, discrete observer, law evaluated at the samples and held)
+        and its one-sample delay (with ``compensate_delay`` the law uses the one-step
+        prediction and the reference at ``t_{k+1}``, as :func:`bwdesign.sim.simulate`
+        does). Input limits and estimate clipping are outside the linear analysis.
     true_params : BoucWenParams, optional
         The plant's true parameters (model mismatch).
     estimator : {"observer", "state"}
-        Output feedback through the observer, or true-state feedback (comparison).
-    delay : bool
-        One-sample computation delay (needs ``dt``).
-    compensate_delay : bool
-        With ``delay``, the law uses the one-step prediction and the reference
-        at ``t_{k+1}`` (as :func:`bwdesign.sim.simulate` does).
+        Output feedback through the observer, or true-state feedback (comparison; the
+        loop's observer is then not used).
 
     Returns
     -------
@@ -183,21 +166,15 @@ def analyze_loop(
 
     Examples
     --------
-    >>> from bwdesign import preset
-    >>> a = analyze_loop(preset("paper_experiment"), 1.0, 2.0, (8, 64, -512), dt=2e-4)
+    >>> from bwdesign import ClosedLoop, ObserverSpec, make_controller, preset
+    >>> p = preset("paper_experiment")
+    >>> law = make_controller(p, 1.0, 2.0)
+    >>> loop = ClosedLoop(p, ObserverSpec.of("phso", (8, 64, -512)), law, dt=2e-4)
+    >>> a = analyze_loop(loop)
     >>> a.stable, round(a.slowest_decay_rate, 2)
     (True, 0.1)
     """
-    kw = dict(
-        dt=dt,
-        form=form,
-        integral_rate=integral_rate,
-        true_params=true_params,
-        estimator=estimator,
-        delay=delay,
-        compensate_delay=compensate_delay,
-    )
-    sy = loop_systems(params, lambda1, lambda2, gains, **kw)
+    sy = loop_systems(loop, true_params=true_params, estimator=estimator)
     dt = sy.dt
     poles = np.linalg.eigvals(sy.A_cl)
     if dt is None:
@@ -220,15 +197,16 @@ def analyze_loop(
     pm, wc = _phase_margin(sy.loop, dt)
     ok_dm = math.isfinite(pm) and pm > 0 and math.isfinite(wc) and wc > 0
     dm = math.radians(pm) / wc if ok_dm else math.nan
+    ctrl = loop.controller
     return LoopAnalysis(
-        lambda1=float(lambda1),
-        lambda2=float(lambda2),
-        gains=None if estimator == "state" else tuple(float(v) for v in as_gains(gains)),
+        lambda1=float(ctrl.lambda1),
+        lambda2=float(ctrl.lambda2),
+        gains=None if estimator == "state" else tuple(float(v) for v in loop.observer.gains),
         dt=dt,
-        integral_rate=integral_rate,
-        form=form,
+        integral_rate=ctrl.integral_rate,
+        form=ctrl.form,
         estimator=estimator,
-        delay=bool(delay),
+        delay=loop.delay,
         poles=poles,
         poles_s=poles_s,
         stable=bool(stable),
@@ -319,33 +297,23 @@ def _perturbed(params: BoucWenParams, parameter: str, delta: float) -> BoucWenPa
 
 
 def stability_interval(
-    params: BoucWenParams,
-    lambda1: float,
-    lambda2: float,
-    gains: Any = None,
+    loop: ClosedLoop,
     *,
     parameter: str = "a1",
     bounds: tuple[float, float] = (-0.99, 10.0),
     rtol: float = 1e-3,
-    **kw: Any,
+    estimator: str = "observer",
 ) -> tuple[float, float]:
     """Interval of relative error ``delta`` in ``parameter`` keeping the loop stable.
 
     Found by a scan (geometric steps away from 0) and bisection; the ends are
-    accurate to ``rtol`` relative. Keywords are those of :func:`analyze_loop`.
+    accurate to ``rtol`` relative. ``loop`` and ``estimator`` as for :func:`analyze_loop`.
     """
-    dt = kw.get("dt")
+    params, dt = loop.model, loop.dt
 
     def ok(d: float) -> bool:
-        A = loop_systems(
-            params,
-            lambda1,
-            lambda2,
-            gains,
-            true_params=_perturbed(params, parameter, d),
-            lti=False,
-            **kw,
-        ).A_cl
+        tp = _perturbed(params, parameter, d)
+        A = loop_systems(loop, true_params=tp, estimator=estimator, lti=False).A_cl
         return stability(A, dt)[0]
 
     if not ok(0.0):
@@ -377,33 +345,29 @@ def stability_interval(
 
 
 def mismatch_sweep(
-    params: BoucWenParams,
-    lambda1: float,
-    lambda2: float,
-    gains: Any = None,
+    loop: ClosedLoop,
     *,
     parameter: str = "a1",
     deltas: Any = None,
-    **kw: Any,
+    estimator: str = "observer",
 ) -> MismatchSweep:
     """Poles and margins of the loop for ``true parameter = (1 + delta) model``.
 
     Parameters
     ----------
-    params : BoucWenParams
-        The model (observer and controller).
-    lambda1, lambda2, gains
-        As for :func:`analyze_loop`.
+    loop : ClosedLoop
+        As for :func:`analyze_loop` (its ``model`` is the one perturbed).
     parameter : {"a1", "a2", "a3"}
     deltas : array_like, optional
         Relative errors; default ``[-5, -2, -1, -0.5, -0.1, 0, 0.1, 0.5, 1, 2, 5] %``.
-    **kw
-        ``dt``, ``form``, ``integral_rate``, ``estimator``, ``delay``, ``compensate_delay``.
+    estimator : {"observer", "state"}
+        As for :func:`analyze_loop`.
 
     Returns
     -------
     MismatchSweep
     """
+    params = loop.model
     if deltas is None:
         deltas = np.array([-5, -2, -1, -0.5, -0.1, 0, 0.1, 0.5, 1, 2, 5]) / 100.0
     deltas = np.asarray(deltas, dtype=float)
@@ -411,20 +375,14 @@ def mismatch_sweep(
         raise InputError("deltas must be a 1-D array of finite relative errors > -1")
     st, rho, mre, gm, pm = [], [], [], [], []
     for d in deltas:
-        a = analyze_loop(
-            params,
-            lambda1,
-            lambda2,
-            gains,
-            true_params=_perturbed(params, parameter, float(d)),
-            **kw,
-        )
+        tp = _perturbed(params, parameter, float(d))
+        a = analyze_loop(loop, true_params=tp, estimator=estimator)
         st.append(a.stable)
         rho.append(a.spectral_radius if a.spectral_radius is not None else math.nan)
         mre.append(a.max_real_part)
         gm.append(a.gain_margin_db)
         pm.append(a.phase_margin if a.stable else math.nan)
-    interval = stability_interval(params, lambda1, lambda2, gains, parameter=parameter, **kw)
+    interval = stability_interval(loop, parameter=parameter, estimator=estimator)
     return MismatchSweep(
         parameter=parameter,
         deltas=deltas,

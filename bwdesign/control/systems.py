@@ -38,7 +38,6 @@ over all crossovers), and the delay margin as phase margin / crossover.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -46,11 +45,12 @@ import numpy as np
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
-from ..model.plant import check_dt, discretize
+from ..model.plant import discretize
 from ..observers.gains import as_gains, discrete_gains
-from .controllers import TrackingController, TuningWarning, make_controller
+from .controllers import TrackingController
+from .loop import ClosedLoop
 
-__all__ = ["loop_systems", "closed_loop_matrix"]
+__all__ = ["loop_systems", "closed_loop_matrix", "loop_parts"]
 
 
 _C3 = np.array([1.0, 0.0, 0.0])
@@ -96,14 +96,6 @@ class LoopSystems:
     def with_loop_gain(self, k: float) -> np.ndarray:
         """Closed-loop matrix with the plant input scaled by ``k`` (``A_cl`` is affine in k)."""
         return self.A_cl + (k - 1.0) * self.A_in
-
-
-def _ctrl(params, lambda1, lambda2, form, dt, integral_rate=None) -> TrackingController:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", TuningWarning)
-        return make_controller(
-            params, lambda1, lambda2, form=form, dt=dt, integral_rate=integral_rate
-        )
 
 
 def _discrete_controller(F, g, K, Kx, ki, dt, *, delay, compensate, integral):
@@ -160,37 +152,22 @@ def _discrete_controller(F, g, K, Kx, ki, dt, *, delay, compensate, integral):
 
 
 def loop_systems(
-    params: BoucWenParams,
-    lambda1: float,
-    lambda2: float,
-    gains: Any,
+    loop: ClosedLoop,
     *,
-    dt: float | None = None,
-    form: str = "continuous",
-    integral_rate: float | None = None,
     true_params: BoucWenParams | None = None,
     estimator: str = "observer",
-    delay: bool = False,
-    compensate_delay: bool = True,
     loop_gain: float = 1.0,
     lti: bool = True,
 ) -> LoopSystems:
     """Build plant, controller, loop transfer and closed-loop matrix.
 
-    Parameters are those of :func:`analyze_loop`; ``loop_gain`` scales the
-    plant input (used to find the gain-margin interval) and ``lti=False``
-    skips building the python-control objects.
+    Parameters are those of :func:`~bwdesign.control.analysis.analyze_loop`;
+    ``loop_gain`` scales the plant input (used to find the gain-margin interval) and
+    ``lti=False`` skips building the python-control objects.
     """
-    if form not in ("continuous", "discrete"):
-        raise InputError(f"form must be 'continuous' or 'discrete', got {form!r}")
-    if estimator not in ("observer", "state"):
-        raise InputError(f"estimator must be 'observer' or 'state', got {estimator!r}")
-    if dt is None and (form == "discrete" or delay):
-        raise InputError("the discrete form and the computation delay need a sample time dt (s)")
-    if dt is not None:
-        dt = check_dt(dt)
+    params, ctrl, dt, delay = loop_parts(loop, estimator)
+    compensate_delay = loop.compensate_delay
     tp = params if true_params is None else true_params
-    ctrl = _ctrl(params, lambda1, lambda2, form, dt, integral_rate)
     Kx, Kr = ctrl.linear_gains()
     ki = ctrl.ki
     integral = ctrl.integral_rate is not None
@@ -223,7 +200,7 @@ def loop_systems(
             raise InputError("the state-feedback comparison is defined without delay or integrator")
         return _state_feedback(Ap, Bp, Kxs, Kr, dt, lti)
 
-    l = as_gains(gains)
+    l = as_gains(loop.observer.gains)
     if dt is None:
         Ac, Bc, Cc, Dc, b_ff, b_int = _continuous_controller(params, l, s3, Kxs)
         ref_advance = False
@@ -296,9 +273,32 @@ def _continuous_controller(
     return Ac, ls[:, None], Kxs[None, :], np.zeros((1, 1)), B0, np.zeros(3)
 
 
-def closed_loop_matrix(params: BoucWenParams, lambda1: float, lambda2: float, gains: Any, **kw):
+def closed_loop_matrix(loop: ClosedLoop, **kw: Any) -> np.ndarray:
     """Closed-loop state matrix (see :func:`loop_systems` for the keywords)."""
-    return loop_systems(params, lambda1, lambda2, gains, lti=False, **kw).A_cl
+    return loop_systems(loop, lti=False, **kw).A_cl
+
+
+def loop_parts(
+    loop: ClosedLoop, estimator: str
+) -> tuple[BoucWenParams, TrackingController, float | None, bool]:
+    """``(model, law, dt, delay)`` of a loop the linear analysis covers, or ``InputError``.
+
+    The analysis covers the PHSO's linear part (the ESO's is the same with ``x3``
+    held) and eq. (12) in either form; ``estimator="state"`` ignores the observer.
+    """
+    if not isinstance(loop, ClosedLoop):
+        raise InputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    if estimator not in ("observer", "state"):
+        raise InputError(f"estimator must be 'observer' or 'state', got {estimator!r}")
+    if estimator == "observer" and loop.observer.kind not in ("phso", "eso"):
+        raise InputError(
+            "the linear loop analysis covers the PHSO and the ESO (3 gains), not "
+            f"{loop.observer.kind!r}"
+        )
+    ctrl, dt = loop.controller, loop.dt
+    if dt is None and loop.delay:
+        raise InputError("the computation delay needs a sample time dt (s)")
+    return loop.model, ctrl, dt, loop.delay
 
 
 def stability(A: np.ndarray, dt: float | None) -> tuple[bool, float]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -12,9 +13,12 @@ from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
-from ..observers.gains import as_gains, gains_for_observer
+from ..observers.gains import check_gains, gains_for_observer
+from ..observers.spec import ObserverSpec
 from ..validate import NONNEGATIVE, POSITIVE, Range, integer, real
 from .analysis import LoopAnalysis, analyze_loop
+from .controllers import TuningWarning, make_controller
+from .loop import ClosedLoop
 from .systems import LoopSystems, loop_systems, stability
 
 __all__ = ["observer_gains", "digital_tuning", "DigitalTuning", "MarginRequirements"]
@@ -419,9 +423,17 @@ class _Law:
     integral_ratio: float | None
     delay: bool
 
-    def kw(self, lam: float) -> dict:
-        ir = None if self.integral_ratio is None else self.integral_ratio * lam
-        return dict(dt=self.dt, form="discrete", integral_rate=ir, delay=self.delay)
+    def integral_rate(self, lam: float) -> float | None:
+        return None if self.integral_ratio is None else self.integral_ratio * lam
+
+    def loop(self, params: BoucWenParams, lam: float, gains: Any) -> ClosedLoop:
+        """The candidate's loop: the PHSO with ``gains``, this law with ``lambda = lam``."""
+        ir = self.integral_rate(lam)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", TuningWarning)
+            law = make_controller(params, lam, lam, form="discrete", dt=self.dt, integral_rate=ir)
+        spec = ObserverSpec.of("phso", gains)
+        return ClosedLoop(params, spec, law, dt=self.dt, delay=self.delay)
 
 
 def _score(req: dict[str, float], gm: float, pm: float, dm: float) -> float:
@@ -447,7 +459,7 @@ def _observers(
             except InputError:  # pragma: no cover - a triple real pole is always valid
                 continue
         return observers
-    l = as_gains(gains)
+    l = check_gains(params, gains)  # the loop of every candidate needs Hurwitz gains
     ev = np.linalg.eigvals(
         np.array(
             [
@@ -478,9 +490,13 @@ def _screen(
             worst = [math.inf, math.inf, math.inf]
             stable = True
             pruned = False
-            for tp in truths:
+            try:
+                loop = law.loop(params, lam, l)
+            except InputError:
+                loop, stable = None, False
+            for tp in truths if loop is not None else ():
                 try:
-                    sy = loop_systems(params, lam, lam, l, true_params=tp, lti=False, **law.kw(lam))
+                    sy = loop_systems(loop, true_params=tp, lti=False)
                     m = _fast_margins(sy, dt, w)
                 except (InputError, np.linalg.LinAlgError, ValueError):
                     m = None
@@ -497,7 +513,7 @@ def _screen(
                     "observer_bandwidth": float(om),
                     "gains": tuple(float(v) for v in l),
                     "lambda": lam,
-                    "integral_rate": law.kw(lam)["integral_rate"],
+                    "integral_rate": law.integral_rate(lam),
                     "stable": stable,
                     "worst_gain_margin_db": worst[0] if stable else -math.inf,
                     "worst_phase_margin_deg": worst[1] if stable else -math.inf,
@@ -521,9 +537,9 @@ def _verify(
     worst = [math.inf, math.inf, math.inf]
     stable = True
     nominal = None
-    lam = c["lambda"]
+    loop = law.loop(params, c["lambda"], c["gains"])
     for tp in truths:
-        a = analyze_loop(params, lam, lam, c["gains"], true_params=tp, **law.kw(lam))
+        a = analyze_loop(loop, true_params=tp)
         if nominal is None:
             nominal = a
         stable &= a.stable

@@ -208,17 +208,21 @@ def certified_envelope(udot_max: float, simulated_rate: float) -> float:
     return ENVELOPE_MARGIN * float(simulated_rate)
 
 
-def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
-    """Worst tracking error and input rate simulated at the box's corners."""
+def _loop(params, dt, c, delay, observer) -> ClosedLoop:
+    """A candidate's loop: its gains and eq. (12) constants, unsaturated, on the reference."""
     ctrl = make_controller(
         params, c["lambda"], c["lambda"], form="discrete", dt=dt,
         integral_rate=c["integral_rate"],
     )  # fmt: skip
-    loop = ClosedLoop(
+    return ClosedLoop(
         params, ObserverSpec.of(observer, c["gains"]), ctrl, dt=dt, delay=delay,
         start=ON_REFERENCE,
     )  # fmt: skip
-    res = simulate_corners(loop, box, reference)
+
+
+def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
+    """Worst tracking error and input rate simulated at the box's corners."""
+    res = simulate_corners(_loop(params, dt, c, delay, observer), box, reference)
     if not res.stable.all():
         return {"simulated_maxe": None, "simulated_udot_max": None}
     return {
@@ -324,20 +328,13 @@ def synthesize_robust(
         # corners need with a margin when their input moves faster
         env = certified_envelope(udot_max, c["simulated_udot_max"])
         rc = certify_robust(
-            params,
-            c["gains"],
-            dt=tuning.dt,
+            _loop(params, tuning.dt, c, delay, observer),
             uncertainty=uncertainty,
             udot_max=env,
             reference=reference,
-            lambda1=c["lambda"],
-            lambda2=c["lambda"],
-            integral_rate=c["integral_rate"],
-            delay=delay,
             noise_max=noise_max,
             interior_samples=interior_samples,
             seed=seed,
-            observer=observer,
         )
         c.update(
             holds=rc.holds,

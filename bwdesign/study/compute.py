@@ -17,6 +17,7 @@ from ..certify.linear import error_dynamics, hysteresis_bode
 from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
 from ..control.analysis import analyze_loop
+from ..control.loop import ClosedLoop
 from ..control.tuning import digital_tuning
 from ..errors import ConfigError, InputError
 from ..model.config import StageConfig
@@ -271,12 +272,13 @@ def _loop(r: _Run) -> LoopStudy:
     gains = r.loop_gains()
     r.say("tracking-loop analysis (continuous, sampled, digital tuning)")
     ctl = r.config.controller
+    sampled = ClosedLoop.from_config(r.config, gains=gains, saturate=False)
     return LoopStudy(
         lambda1=ctl.lambda1,
         lambda2=ctl.lambda2,
         gains=tuple(gains),
-        continuous=analyze_loop(r.params, ctl.lambda1, ctl.lambda2, gains),
-        sampled=analyze_loop(r.params, ctl.lambda1, ctl.lambda2, gains, dt=r.dt),
+        continuous=analyze_loop(sampled.replace(dt=None)),
+        sampled=analyze_loop(sampled),
     )
 
 

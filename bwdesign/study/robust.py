@@ -38,26 +38,14 @@ def robust_loop(
     config: StageConfig, tuning: DigitalTuning, udot_max: float, observer: str
 ) -> RobustLoop:
     """One observer's robust certificate and its corners simulated (noise free)."""
-    params, box, ref, dt = config.plant, config.uncertainty, config.reference, float(config.dt)
+    box, ref = config.uncertainty, config.reference
     gains = tuning.observer_gains_for(observer)
     loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
     sim = simulate_corners(loop, box, ref)
     stable = bool(sim.stable.all())
     rate = float(np.nanmax(sim.input_rate_max)) if stable else math.nan
     env = certified_envelope(udot_max, rate) if stable else udot_max
-    rc = certify_robust(
-        params,
-        gains,
-        dt=dt,
-        uncertainty=box,
-        udot_max=env,
-        reference=ref,
-        lambda1=tuning.lambda1,
-        lambda2=tuning.lambda2,
-        integral_rate=tuning.integral_rate,
-        delay=tuning.delay,
-        observer=observer,
-    )
+    rc = certify_robust(loop, uncertainty=box, udot_max=env, reference=ref)
     worst = float(np.nanmax(sim.maxe)) if stable else math.nan
     worst_est = np.nanmax(sim.estimation_maxe, axis=0) if stable else np.full(3, math.nan)
     ratio = rc.tracking_bound / worst if rc.holds and worst > 0 else None

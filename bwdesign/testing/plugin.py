@@ -20,6 +20,8 @@ from pathlib import Path
 
 import pytest
 
+from ..errors import RequirementFailed
+
 _SENTENCE = {
     "certified": "gains are certified",
     "min_decay": "certified decay >= {v:g} 1/s",
@@ -65,10 +67,6 @@ def pytest_collection_modifyitems(
     )
     for path in paths:
         items.extend(StageFile.from_parent(session, path=path).collect())
-
-
-class RequirementFailed(Exception):
-    """A requirement of a stage file does not hold."""
 
 
 class StageFile(pytest.File):
