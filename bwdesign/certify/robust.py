@@ -23,8 +23,8 @@ map (:func:`rho_interval`, time varying), ``j`` the plant's hysteresis increment
 ``dh`` the model-minus-plant increment at the same ``x3`` and ``x12 = (x_d, x_d') +
 delta``. The model error is an *input driven by the state and the reference*:
 its state-dependent part ``(Fm - Fv)[:, :2] delta`` stays in the vertex's system
-matrix, the rest is exogenous: the reference terms (computed exactly along the
-reference, per vertex), ``|x3| <= h_max``, ``|j| <= (alpha + (|beta| + |gamma|)
+matrix, the rest is exogenous: the reference terms (bounded at every time ``t >= 0`` per
+vertex by :func:`~bwdesign.model.reference_cover.sup_abs`), ``|x3| <= h_max``, ``|j| <= (alpha + (|beta| + |gamma|)
 h_max) |du|``, ``|dh| <= (|dalpha| + (|dbeta| + |dgamma|) h_max) |du|
 exp((|beta| + |gamma|) |du|)`` (Gronwall) with ``|du| <= udot_max dt``, and
 ``|n| <= noise_max``.
@@ -40,9 +40,9 @@ affine in ``rho``) and ``z~ = z - G^-1 w_slow``. Then exactly::
     z~+ = A(rho_k) z~ + (rho_k - rho_c) E G^-1 w_slow,k - G^-1 (w_slow,k+1 - w_slow,k) + B_f f_k
 
 with ``E = dA/drho`` and ``x3_{k+1} - x3_k = j_k``. The ellipsoid is certified for
-``z~``, whose inputs are the *increments* of the reference terms (exact along the
-reference), the ``rho`` coupling and the fast inputs; the quasi-static part
-``c' G^-1 w_slow`` is bounded exactly along the reference and added to each peak.
+``z~``, whose inputs are the *increments* of the reference terms (bounded at every
+time by ``sup_abs``), the ``rho`` coupling and the fast inputs; the quasi-static part
+``c' G^-1 w_slow`` is bounded the same way and added to each peak.
 A loop that rejects a slowly varying model error (integral action, the PHDO's
 disturbance state) thus gets the credit the arbitrary-signal bound denied it. For
 the PHDO ``rho = 1`` is fixed and there is no coupling term.
