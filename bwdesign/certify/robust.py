@@ -24,9 +24,9 @@ map (:func:`rho_interval`, time varying), ``j`` the plant's hysteresis increment
 delta``. The model error is an *input driven by the state and the reference*:
 its state-dependent part ``(Fm - Fv)[:, :2] delta`` stays in the vertex's system
 matrix, the rest is exogenous: the reference terms (bounded at every time ``t >= 0`` per
-vertex by :func:`~bwdesign.model.reference_cover.sup_abs`), ``|x3| <= h_max``, ``|j| <= (alpha + (|beta| + |gamma|)
-h_max) |du|``, ``|dh| <= (|dalpha| + (|dbeta| + |dgamma|) h_max) |du|
-exp((|beta| + |gamma|) |du|)`` (Gronwall) with ``|du| <= udot_max dt``, and
+vertex by :func:`~bwdesign.model.reference_cover.sup_abs`), ``|x3| <= h_max``,
+``|j| <= (alpha + (|beta| + |gamma|) h_max) |du|``,
+``|dh| <= (|dalpha| + (|dbeta| + |dgamma|) h_max) |du| exp((|beta| + |gamma|) |du|)`` (Gronwall) with ``|du| <= udot_max dt``, and
 ``|n| <= noise_max``.
 
 Slow inputs, fast inputs
@@ -385,7 +385,7 @@ def _loop(loop: ClosedLoop) -> tuple[_Loop, str]:
         raise InputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
     params, obs, ctrl = loop.model, loop.observer, loop.controller
     require_bounded(params)
-    if obs.kind not in ("phso", "phdo"):
+    if not obs.hysteresis_model:
         raise InputError(
             f"the robust loop certificate covers the PHSO and the PHDO, not {obs.kind!r}"
         )
@@ -403,7 +403,7 @@ def _loop(loop: ClosedLoop) -> tuple[_Loop, str]:
             "the robust loop certificate covers the one-sample delay compensated only "
             "(compensate_delay=True)"
         )
-    if obs.kind == "phdo":
+    if obs.four_state:
         l4 = np.asarray(obs.gains, float)
         if l4[2] != 0:
             raise InputError(

@@ -34,7 +34,7 @@ from ..control.tuning import digital_tuning
 from ..model.config import load_plant
 from ..model.params import BoucWenParams
 from ..model.references import Reference, Sine, Step, Triangle
-from ..observers.spec import ObserverSpec
+from ..observers.spec import N_GAINS, OBSERVER_KINDS, ObserverSpec
 from ..output.files import FileTarget, prepare_file
 from ..output.jsonenc import dump_json
 from ..sim.closed_loop import simulate
@@ -70,9 +70,6 @@ def _gains(text: str) -> tuple[float, ...]:
     if not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(f"gains must be finite, got {text!r}")
     return values
-
-
-_N_GAINS = {"phso": 3, "eso": 3, "phdo": 4}
 
 
 def simulate_args(p: argparse.ArgumentParser) -> None:
@@ -130,7 +127,7 @@ def _reference_args(p: argparse.ArgumentParser) -> None:
 def _loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--observer",
-        choices=("phso", "eso", "phdo", "ukf"),
+        choices=OBSERVER_KINDS,
         default="phso",
         help="observer (default phso; phdo: the hysteresis observer with a disturbance state)",
     )
@@ -329,12 +326,12 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
     if args.tuning is not None and args.dt is None:
         raise UsageError("--dt is required (or a --plant FILE.toml that sets it)")
     tuning = _tuning(args, params, stage) if args.tuning is not None else None
-    if args.observer in _N_GAINS and args.gains is None:
-        names = ",".join(f"l{i + 1}" for i in range(_N_GAINS[args.observer]))
+    if args.observer in N_GAINS and args.gains is None:
+        names = ",".join(f"l{i + 1}" for i in range(N_GAINS[args.observer]))
         raise UsageError(f"--observer {args.observer} needs --gains {names} (or --tuning digital)")
-    if args.observer in _N_GAINS and len(args.gains) != _N_GAINS[args.observer]:
+    if args.observer in N_GAINS and len(args.gains) != N_GAINS[args.observer]:
         raise UsageError(
-            f"--observer {args.observer} takes {_N_GAINS[args.observer]} gains, got "
+            f"--observer {args.observer} takes {N_GAINS[args.observer]} gains, got "
             f"{len(args.gains)}: {','.join(f'{g:g}' for g in args.gains)}"
         )
     for opt in ("lambda1", "lambda2", "dt", "duration"):

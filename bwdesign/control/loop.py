@@ -166,14 +166,14 @@ class ClosedLoop:
         obs = self.observer
         if obs.kind in ("phso", "eso"):
             check_gains(self.model, obs.gains)
-        elif obs.kind == "phdo":
+        elif obs.four_state:
             check_disturbance_gains(self.model, obs.gains)
         if self.controller.hysteresis_jump and obs.kind == "eso":
             raise InputError(
                 "hysteresis_jump needs an observer with the hysteresis model (PHSO); the ESO "
                 "has none"
             )
-        if self.controller.hysteresis_jump and obs.kind == "phdo":
+        if self.controller.hysteresis_jump and obs.four_state:
             raise InputError(
                 "hysteresis_jump is not implemented for the disturbance observer (PHDO): its "
                 "law would need the jump of x3 with d added; use the PHSO or a law without "

@@ -20,15 +20,27 @@ from typing import Any
 
 from ..errors import GainError, InputError
 from ..validate import GAIN, UDOT_MAX, real
-from .gains import gains_for_observer
+from .gains import GAIN_OBSERVERS, gains_for_observer
 
-__all__ = ["ObserverSpec", "OBSERVER_KINDS", "GAIN_KINDS"]
+__all__ = [
+    "ObserverSpec",
+    "OBSERVER_KINDS",
+    "GAIN_KINDS",
+    "DISTURBANCE_KIND",
+    "HYSTERESIS_KINDS",
+    "N_GAINS",
+]
 
-#: The built-in observers.
-OBSERVER_KINDS = ("phso", "eso", "phdo", "ukf")
 #: The observers that run on gains (the UKF runs on its noise model).
-GAIN_KINDS = ("phso", "eso", "phdo")
-_N_GAINS = {"phso": 3, "eso": 3, "phdo": 4}
+GAIN_KINDS = GAIN_OBSERVERS
+#: The built-in observers.
+OBSERVER_KINDS = (*GAIN_KINDS, "ukf")
+#: The disturbance observer: four states, the law sees the lumped ``x3hat + dhat``.
+DISTURBANCE_KIND = "phdo"
+#: The observers with the hysteresis model (x3 estimated through it).
+HYSTERESIS_KINDS = ("phso", DISTURBANCE_KIND)
+#: The number of continuous gains each kind takes.
+N_GAINS = {kind: 4 if kind == DISTURBANCE_KIND else 3 for kind in GAIN_KINDS}
 
 
 @dataclass(frozen=True)
@@ -72,9 +84,9 @@ class ObserverSpec:
             )
         if kind in GAIN_KINDS:
             if self.gains is None:
-                names = "l1, l2, l3, l4" if kind == "phdo" else "l1, l2, l3"
+                names = ", ".join(f"l{i + 1}" for i in range(N_GAINS[kind]))
                 raise InputError(f"the {kind.upper()} needs observer gains {names}")
-            object.__setattr__(self, "gains", _gains(self.gains, _N_GAINS[kind], kind))
+            object.__setattr__(self, "gains", _gains(self.gains, N_GAINS[kind], kind))
         elif self.gains is not None:
             raise InputError(f"the {kind} observer takes no gains")
         if self.udot_max is not None:
@@ -99,8 +111,8 @@ class ObserverSpec:
 
         Four gains are taken as the PHDO's own; the PHSO and the ESO take three.
         """
-        if kind == "phdo" and gains is not None and len(_seq(gains)) == 3:
-            gains = gains_for_observer("phdo", gains)
+        if kind == DISTURBANCE_KIND and gains is not None and len(_seq(gains)) == 3:
+            gains = gains_for_observer(kind, gains)
         values = None if gains is None else tuple(_seq(gains))
         return cls(kind=kind, gains=values, udot_max=udot_max)
 
@@ -112,7 +124,12 @@ class ObserverSpec:
     @property
     def four_state(self) -> bool:
         """The disturbance observer: four states ``(x1, x2, x3, d)``, the law sees ``x3 + d``."""
-        return self.kind == "phdo"
+        return self.kind == DISTURBANCE_KIND
+
+    @property
+    def hysteresis_model(self) -> bool:
+        """The observer estimates ``x3`` through the hysteresis model (PHSO, PHDO)."""
+        return self.kind in HYSTERESIS_KINDS
 
     @property
     def label(self) -> str:

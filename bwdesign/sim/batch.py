@@ -32,6 +32,7 @@ from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.references import Reference
+from ..observers.spec import GAIN_KINDS
 from .kernel import (
     ARRAY,
     LoopConstants,
@@ -45,7 +46,7 @@ from .run import Run, diverged, prepare, resolve_window
 
 __all__ = ["BatchResult", "simulate_batch", "hysteresis_increment_batch"]
 
-BATCH_OBSERVERS = ("phso", "eso", "phdo")
+BATCH_OBSERVERS = GAIN_KINDS
 _NOISE_BLOCK = 512
 
 

@@ -82,7 +82,7 @@ def make_observer(
         return obs
     if spec.kind in _BUILTIN:
         cls = _BUILTIN[spec.kind]
-        if x0 is not None and spec.kind == "phdo" and np.shape(x0) == (3,):
+        if x0 is not None and spec.four_state and np.shape(x0) == (3,):
             x0 = np.array([*np.asarray(x0, dtype=float), 0.0])  # d starts at 0
         return cls(params, spec.gains, dt, x0=x0, u_prev=u_prev, allow_unbounded=allow_unbounded)
     from ..observers.ukf import UnscentedObserver

@@ -123,8 +123,8 @@ class LoopConstants:
         self.clip = bool(ctrl.estimate_limits)
         self.limits = ctrl.estimate_limits
         self.jump = bool(ctrl.hysteresis_jump)
-        self.four = loop.observer.kind == "phdo"
-        self.phso = loop.observer.kind in ("phso", "phdo")
+        self.four = loop.observer.four_state
+        self.phso = loop.observer.hysteresis_model
         self.K1, self.K2, self.K3 = (float(v) for v in K[:3])
         self.K4 = float(K[3]) if self.four else 0.0
         zm = discretize(loop.model, loop.dt)
@@ -174,7 +174,7 @@ class LoopState:
 
 def discrete_observer_gains(loop: ClosedLoop) -> np.ndarray:
     """The sampled observer's gain ``K`` (pole-matched to the continuous gains)."""
-    if loop.observer.kind == "phdo":
+    if loop.observer.four_state:
         return disturbance_discrete_gains(loop.model, loop.observer.gains, loop.dt)
     return discrete_gains(loop.model, loop.observer.gains, loop.dt)
 

@@ -32,6 +32,7 @@ from ..errors import InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope, derive_envelope
 from ..model.params import MODEL_FIELDS, BoucWenParams
+from ..observers.spec import GAIN_KINDS
 from ..sim.batch import BatchResult, simulate_batch
 from ..sim.closed_loop import simulate
 from ..sim.result import SimulationResult
@@ -47,7 +48,7 @@ __all__ = [
 ]
 
 #: The observers of the report's runs, in table order.
-OBSERVERS = ("phso", "eso", "phdo")
+OBSERVERS = GAIN_KINDS
 
 
 @dataclass(frozen=True)
