@@ -26,8 +26,8 @@ its state-dependent part ``(Fm - Fv)[:, :2] delta`` stays in the vertex's system
 matrix, the rest is exogenous: the reference terms (bounded at every time ``t >= 0`` per
 vertex by :func:`~bwdesign.model.reference_cover.sup_abs`), ``|x3| <= h_max``,
 ``|j| <= (alpha + (|beta| + |gamma|) h_max) |du|``,
-``|dh| <= (|dalpha| + (|dbeta| + |dgamma|) h_max) |du| exp((|beta| + |gamma|) |du|)`` (Gronwall) with ``|du| <= udot_max dt``, and
-``|n| <= noise_max``.
+``|dh| <= (|dalpha| + (|dbeta| + |dgamma|) h_max) |du| exp((|beta| + |gamma|) |du|)``
+(Gronwall) with ``|du| <= udot_max dt``, and ``|n| <= noise_max``.
 
 Slow inputs, fast inputs
 ------------------------
