@@ -111,12 +111,14 @@ def finite_float(text: str) -> float:
     return value
 
 
-def gains_triple(text: str) -> tuple[float, float, float]:
-    """argparse type: ``l1,l2,l3``, three finite numbers."""
+def gains_list(text: str, counts: tuple[int, ...] = (3,)) -> tuple[float, ...]:
+    """``l1,l2,...``: ``counts`` comma-separated finite numbers (the one gains parser)."""
     parts = [p.strip() for p in text.split(",")]
-    if len(parts) != 3:
+    if len(parts) not in counts:
+        many = " or ".join({3: "three", 4: "four"}.get(n, str(n)) for n in counts)
+        names = " or ".join(",".join(f"l{i + 1}" for i in range(n)) for n in counts)
         raise argparse.ArgumentTypeError(
-            f"expected three comma-separated gains l1,l2,l3, got {text!r}"
+            f"expected {many} comma-separated gains {names}, got {text!r}"
         )
     try:
         values = tuple(float(p) for p in parts)
@@ -124,7 +126,17 @@ def gains_triple(text: str) -> tuple[float, float, float]:
         raise argparse.ArgumentTypeError(f"gains must be numbers, got {text!r}") from None
     if not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(f"gains must be finite, got {text!r}")
-    return values  # type: ignore[return-value]
+    return values
+
+
+def gains_triple(text: str) -> tuple[float, float, float]:
+    """argparse type: ``l1,l2,l3``, three finite numbers."""
+    return gains_list(text, (3,))  # type: ignore[return-value]
+
+
+def observer_gains_arg(text: str) -> tuple[float, ...]:
+    """argparse type: three (phso, eso) or four (phdo) comma-separated finite gains."""
+    return gains_list(text, (3, 4))
 
 
 def add_plant_args(p: argparse.ArgumentParser) -> None:

@@ -47,6 +47,7 @@ from .args import (
     finite_float,
     integer,
     nonneg_float,
+    observer_gains_arg,
     positive_float,
 )
 from .stage import Stage, load_stage, resolved_copy
@@ -54,22 +55,6 @@ from .stage import Stage, load_stage, resolved_copy
 __all__ = ["simulate_args", "run_simulate", "simulate_request", "SimulateRequest"]
 
 MAX_SAMPLES = 20_000_000
-
-
-def _gains(text: str) -> tuple[float, ...]:
-    """argparse type: three (phso, eso) or four (phdo) comma-separated finite gains."""
-    parts = [p.strip() for p in text.split(",")]
-    if len(parts) not in (3, 4):
-        raise argparse.ArgumentTypeError(
-            f"expected comma-separated gains l1,l2,l3 (or l1,l2,l3,l4 for phdo), got {text!r}"
-        )
-    try:
-        values = tuple(float(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"gains must be numbers, got {text!r}") from None
-    if not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"gains must be finite, got {text!r}")
-    return values
 
 
 def simulate_args(p: argparse.ArgumentParser) -> None:
@@ -133,7 +118,7 @@ def _loop_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--gains",
-        type=_gains,
+        type=observer_gains_arg,
         default=None,
         metavar="l1,l2,l3[,l4]",
         help="continuous observer gains (1/s, 1/s^2, 1/s[, 1/s]): three for phso and eso, four "
