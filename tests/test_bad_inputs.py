@@ -42,7 +42,7 @@ from bwdesign.certify.disturbance import certify_disturbance
 from bwdesign.certify.robust_observer import certify_robust_observer
 from bwdesign.cli.main import main
 from bwdesign.control.controllers import TrackingController
-from bwdesign.control.tuning import MarginRequirements, digital_tuning
+from bwdesign.design.tuning import MarginRequirements, digital_tuning
 from bwdesign.errors import ConfigError, GainError, InputError, ParameterError
 from bwdesign.extras import require
 from bwdesign.identify import IdentificationData, identify, load_data

@@ -26,8 +26,9 @@ LAYERS = (
     ("observers",),
     ("control",),
     ("certify",),
-    ("codegen",),
     ("sim",),
+    ("design",),  # above sim: the robust design simulates the box's corners
+    ("codegen",),  # above design: export-c synthesises and tunes
     ("study",),
     ("report",),
     ("testing",),
@@ -346,7 +347,7 @@ MAX_PARAMS, MAX_LINES = 10, 120
 #: Public functions still over a limit, with the change that fixes them. The lead empties it.
 LIMITS_ALLOWED: dict[str, set[str]] = {
     # to be removed by the ClosedLoop/study change: sim/, report/, cli/ are being rewritten
-    "bwdesign.sim.robust_design.synthesize_robust": {"params", "lines"},
+    "bwdesign.design.robust.synthesize_robust": {"params", "lines"},
     # ClosedLoop change: these take the loop (or the observer specification) piece by piece
     "bwdesign.certify.robust.certify_robust": {"params"},
     "bwdesign.certify.robust_observer.certify_robust_observer": {"params"},

@@ -11,10 +11,10 @@ import pytest
 
 from bwdesign import ClosedLoop, ObserverSpec, Sine, Start, UncertaintyBox, preset
 from bwdesign.control.controllers import make_controller
-from bwdesign.control.tuning import digital_tuning
+from bwdesign.design.robust import synthesize_robust
+from bwdesign.design.tuning import digital_tuning
 from bwdesign.errors import InputError, ParameterError
 from bwdesign.sim.batch import simulate_batch
-from bwdesign.sim.robust_design import synthesize_robust
 
 DT = 2e-4
 REF = Sine(amplitude=80.0, offset=100.0, frequency=1.0)

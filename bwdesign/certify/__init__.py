@@ -1,5 +1,5 @@
-"""Certificates: result types, the four tiers, LMI synthesis (the only cvxpy, in :mod:`.lmi`) and
-the linear analysis of the error dynamics.
+"""Certificates: result types, the four tiers, the LMI programs (the only cvxpy, in :mod:`.lmi`)
+and the linear analysis of the error dynamics (gain synthesis is in :mod:`bwdesign.design`).
 """
 
 from .checks import continuous_equivalent, rho_interval, sector_interval
@@ -20,13 +20,7 @@ from .linear import (
 )
 from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCertificate
 from .robust import RobustCertificate, certify_robust
-from .robust_observer import (
-    RobustObserverCertificate,
-    RobustObserverSynthesis,
-    certify_robust_observer,
-    synthesize_robust_observer,
-)
-from .synthesis import default_pole_radius, synthesize
+from .robust_observer import RobustObserverCertificate, certify_robust_observer
 from .tiers import certify, certify_discrete
 
 __all__ = [
@@ -43,11 +37,7 @@ __all__ = [
     "certify_robust",
     "RobustCertificate",
     "certify_robust_observer",
-    "synthesize_robust_observer",
     "RobustObserverCertificate",
-    "RobustObserverSynthesis",
-    "synthesize",
-    "default_pole_radius",
     "ErrorDynamics",
     "HysteresisBode",
     "error_system",

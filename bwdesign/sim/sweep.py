@@ -571,7 +571,7 @@ def spec_from_config(
     itself needs (:func:`bwdesign.derive_envelope`, margin 1). The box is
     ``uncertainty``, else the stage's ``[uncertainty]`` (:func:`sweep_box`).
     """
-    from ..control.tuning import digital_tuning
+    from ..design.tuning import digital_tuning
 
     if tuning not in ("config", "digital"):
         raise InputError(f"tuning must be 'config' or 'digital', got {tuning!r}")

@@ -14,10 +14,10 @@ from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 from ..certify.linear import error_dynamics, hysteresis_bode
-from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
 from ..control.analysis import analyze_loop
-from ..control.tuning import digital_tuning
+from ..design.gains import synthesize
+from ..design.tuning import digital_tuning
 from ..errors import ConfigError, InputError
 from ..model.config import StageConfig
 from ..model.params import require_bounded

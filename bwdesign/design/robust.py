@@ -4,7 +4,7 @@
 constants of the sampled PHSO loop *for the box*, not for the nominal point, and
 returns only a design whose robust certificate holds:
 
-1. :func:`bwdesign.control.digital_tuning` with ``uncertainty=box``: every
+1. :func:`bwdesign.design.digital_tuning` with ``uncertainty=box``: every
    (observer bandwidth, lambda) candidate's gain, phase and delay margins are
    checked at every distinct ``(a1, a2, a3)`` corner of the box (not the fixed
    +-2 % of the nominal tuning).
@@ -19,7 +19,7 @@ returns only a design whose robust certificate holds:
 4. The certificate assumes the loop keeps ``|u'| <= udot_max`` (it bounds the
    hysteresis through the input rate) and does not prove it. Each candidate is
    therefore first simulated at every corner of the box
-   (:func:`bwdesign.sim.simulate_batch`, started on the reference, three
+   (:func:`bwdesign.sim.simulate_corners`, started on the reference, three
    periods, statistics after the first): a diverging corner rejects it, and
    when the corners' input moves faster than ``udot_max`` the certificate is
    asked for ``ENVELOPE_MARGIN`` times their fastest rate instead (a wider
@@ -47,7 +47,6 @@ import numpy as np
 from ..certify.robust import RobustCertificate, certify_robust
 from ..control.controllers import make_controller
 from ..control.loop import ON_REFERENCE, ClosedLoop
-from ..control.tuning import DigitalTuning, digital_tuning
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import check_sample_time
@@ -55,13 +54,13 @@ from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_gains, gains_for_observer
 from ..observers.spec import ObserverSpec
+from ..sim.corners import simulate_corners
 from ..validate import below_nyquist
-from .batch import BatchResult, simulate_batch
+from .tuning import DigitalTuning, digital_tuning
 
 __all__ = [
     "RobustDesign",
     "synthesize_robust",
-    "simulate_corners",
     "certified_envelope",
     "ENVELOPE_MARGIN",
 ]
@@ -177,28 +176,6 @@ def _shortlist(tuning: DigitalTuning, n: int) -> list[dict[str, Any]]:
     rest = sorted(fastest.values(), key=lambda c: c["lambda"], reverse=True)
     out += [entry(c, "fastest law meeting the margins at this observer bandwidth") for c in rest]
     return out[:n]
-
-
-def simulate_corners(loop: ClosedLoop, box: UncertaintyBox, reference: Reference) -> BatchResult:
-    """``loop`` simulated at every corner of ``box`` (its start: usually on the reference).
-
-    Three reference periods (0.5 s at least), statistics over the last two; or, for a
-    reference that settles (a step), until 1 s after it has settled with the statistics
-    from its first move on, so that every move of the reference is simulated and
-    measured, as the certificate covers every one. ``input_rate_max`` (over the same
-    window) is what :func:`certified_envelope` compares with the envelope a robust
-    certificate assumes.
-    """
-    if reference.period is not None:
-        duration, window = max(3 * reference.period, 0.5), None
-    else:
-        settles = max(reference.settles_at or 0.0, 0.0)
-        duration = max(settles + 1.0, 1.0)
-        moves = [float(b) for b in reference.breakpoints(0.0, settles)]
-        window = (min(moves, default=0.0), duration) if settles > 0 else None
-    return simulate_batch(
-        loop, reference, box.vertices(loop.model), duration=duration, window=window
-    )
 
 
 def certified_envelope(udot_max: float, simulated_rate: float) -> float:

@@ -8,14 +8,14 @@ from typing import Any
 
 import numpy as np
 
+from ..control.analysis import LoopAnalysis, analyze_loop
+from ..control.systems import LoopSystems, loop_systems, stability
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import as_gains, gains_for_observer
 from ..validate import NONNEGATIVE, POSITIVE, Range, integer, real
-from .analysis import LoopAnalysis, analyze_loop
-from .systems import LoopSystems, loop_systems, stability
 
 __all__ = ["observer_gains", "digital_tuning", "DigitalTuning", "MarginRequirements"]
 
