@@ -25,7 +25,13 @@ from .robust import (
 )
 from .robust_observer import RobustObserverSynthesis, synthesize_robust_observer
 from .tiers import recertify_sampled, synthesize_tier
-from .tuning import DigitalTuning, MarginRequirements, digital_tuning, observer_gains
+from .tuning import (
+    DigitalTuning,
+    MarginRequirements,
+    digital_tuning,
+    observer_gains,
+    stage_tuning,
+)
 
 __all__ = [
     "synthesize",
@@ -33,6 +39,7 @@ __all__ = [
     "synthesize_tier",
     "recertify_sampled",
     "digital_tuning",
+    "stage_tuning",
     "DigitalTuning",
     "MarginRequirements",
     "observer_gains",

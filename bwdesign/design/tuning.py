@@ -10,14 +10,20 @@ import numpy as np
 
 from ..control.analysis import LoopAnalysis, analyze_loop
 from ..control.systems import LoopSystems, loop_systems, stability
-from ..errors import InputError
+from ..errors import ConfigError, InputError
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import as_gains, gains_for_observer
 from ..validate import NONNEGATIVE, POSITIVE, Range, integer, real
 
-__all__ = ["observer_gains", "digital_tuning", "DigitalTuning", "MarginRequirements"]
+__all__ = [
+    "observer_gains",
+    "digital_tuning",
+    "stage_tuning",
+    "DigitalTuning",
+    "MarginRequirements",
+]
 
 
 def observer_gains(params: BoucWenParams, poles: Any) -> np.ndarray:
@@ -398,6 +404,28 @@ def digital_tuning(
         candidates=cands,
         reasoning=_reasoning(params, law, row, designed, margins, scanned, met),
     )
+
+
+def stage_tuning(config: Any, tuning: str) -> DigitalTuning | None:
+    """The law a stage's loop runs: ``None`` for ``tuning="config"`` (its ``[observer]``
+    gains and ``[controller]`` constants), :func:`digital_tuning` at its ``[sampling] dt``
+    for ``"digital"``. What a caller of :func:`bwdesign.sim.sweep.spec_from_config` (the
+    sweep, which simulates the gains it is given) calls first.
+
+    Raises
+    ------
+    InputError
+        ``tuning`` is neither.
+    ConfigError
+        ``"digital"`` for a stage without ``[sampling] dt``.
+    """
+    if tuning not in ("config", "digital"):
+        raise InputError(f"tuning must be 'config' or 'digital', got {tuning!r}")
+    if tuning == "config":
+        return None
+    if config.dt is None:
+        raise ConfigError(f"{config.source or 'config'}: the digital tuning needs [sampling] dt")
+    return digital_tuning(config.plant, config.dt)
 
 
 def _checked_mismatch(mismatch: float | None, uncertainty: UncertaintyBox | None) -> float:
