@@ -46,7 +46,7 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     )
     from .control.loop import ClosedLoop, Start
     from .design.gains import synthesize
-    from .design.robust import RobustDesign, synthesize_robust
+    from .design.robust import RobustDesign, RobustSearch, synthesize_robust
     from .design.robust_observer import RobustObserverSynthesis, synthesize_robust_observer
     from .design.tuning import DigitalTuning, digital_tuning
     from .identify import IdentificationResult, identify
@@ -89,7 +89,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ),
     ".control.loop": ("ClosedLoop", "Start"),
     ".design.gains": ("synthesize",),
-    ".design.robust": ("RobustDesign", "synthesize_robust"),
+    ".design.robust": ("RobustDesign", "RobustSearch", "synthesize_robust"),
     ".design.robust_observer": ("RobustObserverSynthesis", "synthesize_robust_observer"),
     ".design.tuning": ("DigitalTuning", "digital_tuning"),
     ".identify": ("IdentificationResult", "identify"),
@@ -185,6 +185,7 @@ __all__ = [
     "RobustCertificate",
     "synthesize_robust",
     "RobustDesign",
+    "RobustSearch",
     "certify_robust_observer",
     "synthesize_robust_observer",
     "RobustObserverCertificate",

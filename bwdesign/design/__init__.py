@@ -20,6 +20,7 @@ from .gains import default_pole_radius, synthesize
 from .robust import (
     ENVELOPE_MARGIN,
     RobustDesign,
+    RobustSearch,
     certified_envelope,
     synthesize_robust,
 )
@@ -45,6 +46,7 @@ __all__ = [
     "observer_gains",
     "synthesize_robust",
     "RobustDesign",
+    "RobustSearch",
     "certified_envelope",
     "ENVELOPE_MARGIN",
     "synthesize_robust_observer",

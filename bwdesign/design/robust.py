@@ -60,6 +60,7 @@ from .tuning import DigitalTuning, digital_tuning
 
 __all__ = [
     "RobustDesign",
+    "RobustSearch",
     "synthesize_robust",
     "certified_envelope",
     "ENVELOPE_MARGIN",
@@ -185,23 +186,184 @@ def certified_envelope(udot_max: float, simulated_rate: float) -> float:
     return ENVELOPE_MARGIN * float(simulated_rate)
 
 
-def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
+@dataclass(frozen=True)
+class RobustSearch:
+    """How :func:`synthesize_robust` searches: which candidates, and the certificates' sampling.
+
+    Attributes
+    ----------
+    max_candidates : int
+        Observer bandwidths certified (the tuning's choice included), >= 1.
+    extra_gains : tuple of gain triples
+        More observer gains to certify with the tuning's law.
+    interior_samples, seed : int
+        Passed to :func:`bwdesign.certify_robust` (seeded interior points of the box).
+    """
+
+    max_candidates: int = 4
+    extra_gains: tuple[Any, ...] = ()
+    interior_samples: int = 8
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        n = self.max_candidates
+        if isinstance(n, bool) or not isinstance(n, int):
+            raise InputError(f"max_candidates must be an integer >= 1, got {n!r}")
+        if n < 1:
+            raise InputError(f"max_candidates must be >= 1, got {n}")
+
+
+@dataclass(frozen=True)
+class _Request:
+    """What every candidate is simulated and certified against (checked)."""
+
+    params: BoucWenParams
+    dt: float
+    box: UncertaintyBox
+    udot_max: float
+    reference: Reference
+    noise_max: float
+    delay: bool
+    observer: str
+    search: RobustSearch
+
+
+def _corners(rq: _Request, c: dict[str, Any]) -> dict[str, Any]:
     """Worst tracking error and input rate simulated at the box's corners."""
     ctrl = make_controller(
-        params, c["lambda"], c["lambda"], form="discrete", dt=dt,
+        rq.params, c["lambda"], c["lambda"], form="discrete", dt=rq.dt,
         integral_rate=c["integral_rate"],
     )  # fmt: skip
     loop = ClosedLoop(
-        params, ObserverSpec.of(observer, c["gains"]), ctrl, dt=dt, delay=delay,
+        rq.params, ObserverSpec.of(rq.observer, c["gains"]), ctrl, dt=rq.dt, delay=rq.delay,
         start=ON_REFERENCE,
     )  # fmt: skip
-    res = simulate_corners(loop, box, reference)
+    res = simulate_corners(loop, rq.box, rq.reference)
     if not res.stable.all():
         return {"simulated_maxe": None, "simulated_udot_max": None}
     return {
         "simulated_maxe": float(np.max(res.maxe)),
         "simulated_udot_max": float(np.max(res.input_rate_max)),
     }
+
+
+def _candidates(rq: _Request, tuning: DigitalTuning) -> list[dict[str, Any]]:
+    """The shortlist of the tuning, then the given gains with the tuning's law."""
+    cands = _shortlist(tuning, rq.search.max_candidates)
+    for g in rq.search.extra_gains:
+        cands.append(
+            {
+                "observer_bandwidth": math.nan,
+                "gains": tuple(float(v) for v in check_gains(rq.params, g)),
+                "lambda": tuning.lambda1,
+                "integral_rate": tuning.integral_rate,
+                "score": math.nan,
+                "origin": "given gains with the tuning's law",
+            }
+        )
+    return cands
+
+
+def _assess(rq: _Request, c: dict[str, Any]) -> RobustCertificate | None:
+    """Simulate candidate ``c`` at the corners, then certify it (``c`` gets the verdict)."""
+    c["gains"] = gains_for_observer(rq.observer, c["gains"])
+    c.update(_corners(rq, c))
+    c.update(holds=False, tracking_bound=None, estimation_bound=None, envelope=None)
+    c["x3_estimation_bound"] = None
+    if c["simulated_udot_max"] is None:
+        c["status"] = "rejected: the loop diverges at a corner of the box (simulated)"
+        return None
+    # the envelope the certificate assumes: the stage's, or what the simulated
+    # corners need with a margin when their input moves faster
+    env = certified_envelope(rq.udot_max, c["simulated_udot_max"])
+    rc = certify_robust(
+        rq.params,
+        c["gains"],
+        dt=rq.dt,
+        uncertainty=rq.box,
+        udot_max=env,
+        reference=rq.reference,
+        lambda1=c["lambda"],
+        lambda2=c["lambda"],
+        integral_rate=c["integral_rate"],
+        delay=rq.delay,
+        noise_max=rq.noise_max,
+        interior_samples=rq.search.interior_samples,
+        seed=rq.search.seed,
+        observer=rq.observer,
+    )
+    iu = rq.params.input_unit
+    c.update(
+        holds=rc.holds,
+        tracking_bound=rc.tracking_bound,
+        estimation_bound=rc.estimation_bound,
+        x3_estimation_bound=rc.x3_estimation_bound,
+        envelope=env,
+        status=rc.status
+        + (
+            ""
+            if env == rq.udot_max
+            else f" (envelope raised from {rq.udot_max:.4g} {iu}/s: the simulated corners' "
+            f"input reaches {c['simulated_udot_max']:.4g} {iu}/s)"
+        ),
+    )
+    return rc
+
+
+def _design(
+    rq: _Request,
+    tuning: DigitalTuning,
+    results: list[tuple[dict[str, Any], RobustCertificate | None]],
+) -> RobustDesign:
+    """The certified candidate of smallest tracking bound, or a "no" with every verdict."""
+    held = [(c, rc) for c, rc in results if rc is not None and rc.holds]
+    lu = rq.params.length_unit
+    candidates = tuple(c for c, _ in results)
+    if held:
+        c, rc = min(held, key=lambda t: t[1].tracking_bound)
+        reason = (
+            f"{len(held)} of {len(results)} candidates certified over the box; chosen: observer "
+            "gains "
+            f"{', '.join(f'{g:.6g}' for g in c['gains'])} ({c['origin']}), lambda = "
+            f"{c['lambda']:.4g} 1/s, integral rate {c['integral_rate']} 1/s: the smallest "
+            f"certified steady tracking bound, {rc.tracking_bound:.4g} {lu} (worst simulated "
+            f"at the corners {c['simulated_maxe']:.4g} {lu})"
+        )
+        return RobustDesign(
+            feasible=True,
+            gains=tuple(c["gains"]),
+            lambda1=c["lambda"],
+            lambda2=c["lambda"],
+            integral_rate=c["integral_rate"],
+            delay=rq.delay,
+            certificate=rc,
+            tuning=tuning,
+            candidates=candidates,
+            reason=reason,
+            observer=rq.observer,
+        )
+    reason = (
+        f"no robust design: none of the {len(results)} candidates is certified over the box ("
+        + "; ".join(
+            f"omega_o = {c['observer_bandwidth']:.4g} rad/s, lambda = {c['lambda']:.4g} 1/s: "
+            f"{c['status']}"
+            for c, rc in results
+        )
+        + ")"
+    )
+    return RobustDesign(
+        feasible=False,
+        gains=None,
+        lambda1=None,
+        lambda2=None,
+        integral_rate=None,
+        delay=rq.delay,
+        certificate=next((rc for _, rc in results if rc is not None), None),
+        tuning=tuning,
+        candidates=candidates,
+        reason=reason,
+        observer=rq.observer,
+    )
 
 
 def synthesize_robust(
@@ -214,11 +376,8 @@ def synthesize_robust(
     noise_max: float = 0.0,
     integral_ratio: float | None = 0.5,
     delay: bool = True,
-    max_candidates: int = 4,
-    extra_gains: tuple[Any, ...] = (),
-    interior_samples: int = 8,
-    seed: int = 0,
     observer: str = "phdo",
+    search: RobustSearch = RobustSearch(),
 ) -> RobustDesign:
     """Observer gains and eq. (12) constants certified over every plant in a box.
 
@@ -240,12 +399,6 @@ def synthesize_robust(
         Integral action at ``integral_ratio * lambda`` (None: none).
     delay : bool
         One-sample computation delay with compensation.
-    max_candidates : int
-        Observer bandwidths certified (the tuning's choice included), >= 1.
-    extra_gains : tuple of gain triples
-        More observer gains to certify with the tuning's law.
-    interior_samples, seed : int
-        Passed to :func:`certify_robust`.
     observer : {"phdo", "phso"}
         The loop's observer; the PHDO (default) gets ``(l1, l2, 0, l3)`` of each
         candidate (:func:`~bwdesign.observers.gains.disturbance_gains_from`) and its
@@ -254,6 +407,9 @@ def synthesize_robust(
         a1 is high and a3 low (measured on ``paper_experiment`` +-2 %: its input
         rate reaches 5000-8500 V/s against a 397 V/s envelope for every law
         tried), so its certificate's envelope assumption fails there.
+    search : RobustSearch
+        How many candidates, extra gains to try, and the certificates' interior
+        samples and seed (default: 4 candidates, none extra, 8 samples, seed 0).
 
     Returns
     -------
@@ -266,115 +422,14 @@ def synthesize_robust(
     uncertainty.check(params)  # before any work: what certify_robust needs of the box
     if observer not in ("phso", "phdo"):
         raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
-    if isinstance(max_candidates, bool) or not isinstance(max_candidates, int):
-        raise InputError(f"max_candidates must be an integer >= 1, got {max_candidates!r}")
-    if max_candidates < 1:
-        raise InputError(f"max_candidates must be >= 1, got {max_candidates}")
+    if not isinstance(search, RobustSearch):
+        raise InputError(f"search must be a RobustSearch, got {search!r}")
     below_nyquist(reference, check_sample_time(params, dt))
     tuning = digital_tuning(
         params, dt, uncertainty=uncertainty, integral_ratio=integral_ratio, delay=delay
     )
-    cands = _shortlist(tuning, max_candidates)
-    for g in extra_gains:
-        cands.append(
-            {
-                "observer_bandwidth": math.nan,
-                "gains": tuple(float(v) for v in check_gains(params, g)),
-                "lambda": tuning.lambda1,
-                "integral_rate": tuning.integral_rate,
-                "score": math.nan,
-                "origin": "given gains with the tuning's law",
-            }
-        )
-    results: list[tuple[dict[str, Any], RobustCertificate | None]] = []
-    iu = params.input_unit
-    for c in cands:
-        c["gains"] = gains_for_observer(observer, c["gains"])
-        c.update(_corners(params, uncertainty, reference, tuning.dt, c, delay, observer))
-        c.update(holds=False, tracking_bound=None, estimation_bound=None, envelope=None)
-        c["x3_estimation_bound"] = None
-        if c["simulated_udot_max"] is None:
-            c["status"] = "rejected: the loop diverges at a corner of the box (simulated)"
-            results.append((c, None))
-            continue
-        # the envelope the certificate assumes: the stage's, or what the simulated
-        # corners need with a margin when their input moves faster
-        env = certified_envelope(udot_max, c["simulated_udot_max"])
-        rc = certify_robust(
-            params,
-            c["gains"],
-            dt=tuning.dt,
-            uncertainty=uncertainty,
-            udot_max=env,
-            reference=reference,
-            lambda1=c["lambda"],
-            lambda2=c["lambda"],
-            integral_rate=c["integral_rate"],
-            delay=delay,
-            noise_max=noise_max,
-            interior_samples=interior_samples,
-            seed=seed,
-            observer=observer,
-        )
-        c.update(
-            holds=rc.holds,
-            tracking_bound=rc.tracking_bound,
-            estimation_bound=rc.estimation_bound,
-            x3_estimation_bound=rc.x3_estimation_bound,
-            envelope=env,
-            status=rc.status
-            + (
-                ""
-                if env == udot_max
-                else f" (envelope raised from {udot_max:.4g} {iu}/s: the simulated corners' "
-                f"input reaches {c['simulated_udot_max']:.4g} {iu}/s)"
-            ),
-        )
-        results.append((c, rc))
-    held = [(c, rc) for c, rc in results if rc is not None and rc.holds]
-    lu = params.length_unit
-    if held:
-        c, rc = min(held, key=lambda t: t[1].tracking_bound)
-        reason = (
-            f"{len(held)} of {len(results)} candidates certified over the box; chosen: observer "
-            "gains "
-            f"{', '.join(f'{g:.6g}' for g in c['gains'])} ({c['origin']}), lambda = "
-            f"{c['lambda']:.4g} 1/s, integral rate {c['integral_rate']} 1/s: the smallest "
-            f"certified steady tracking bound, {rc.tracking_bound:.4g} {lu} (worst simulated "
-            f"at the corners {c['simulated_maxe']:.4g} {lu})"
-        )
-        return RobustDesign(
-            feasible=True,
-            gains=tuple(c["gains"]),
-            lambda1=c["lambda"],
-            lambda2=c["lambda"],
-            integral_rate=c["integral_rate"],
-            delay=delay,
-            certificate=rc,
-            tuning=tuning,
-            candidates=tuple(c for c, _ in results),
-            reason=reason,
-            observer=observer,
-        )
-    reason = (
-        f"no robust design: none of the {len(results)} candidates is certified over the box ("
-        + "; ".join(
-            f"omega_o = {c['observer_bandwidth']:.4g} rad/s, lambda = {c['lambda']:.4g} 1/s: "
-            f"{c['status']}"
-            for c, rc in results
-        )
-        + ")"
+    rq = _Request(
+        params, tuning.dt, uncertainty, udot_max, reference, noise_max, delay, observer, search
     )
-    return RobustDesign(
-        feasible=False,
-        gains=None,
-        lambda1=None,
-        lambda2=None,
-        integral_rate=None,
-        delay=delay,
-        certificate=next((rc for _, rc in results if rc is not None), None),
-        tuning=tuning,
-        candidates=tuple(c for c, _ in results),
-        reason=reason,
-        observer=observer,
-    )
+    results = [(c, _assess(rq, c)) for c in _candidates(rq, tuning)]
+    return _design(rq, tuning, results)
