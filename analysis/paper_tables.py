@@ -17,7 +17,7 @@ PNG figures in ``--out``):
 2. **Digital loop** (paper Section 5 constants on ``paper_experiment`` at
    0.2 ms): poles, margins, a1-mismatch sensitivity, the predicted and the
    simulated steady-state error; and the digital tuning from
-   :func:`bwdesign.control.digital_tuning`.
+   :func:`bwdesign.design.digital_tuning`.
 3. **Table 2** (Section 5): sampled loop at dt = 0.2 ms, sine
    ``80 sin(2 pi t) + 100`` and 1 Hz triangle 180 um peak to peak, offset
    100, with the paper's constants (eq. 12 as printed) and with the digital
@@ -56,7 +56,7 @@ from bwdesign import (
     preset,
 )
 from bwdesign.control.analysis import analyze_loop, mismatch_sweep
-from bwdesign.control.tuning import digital_tuning, observer_gains
+from bwdesign.design.tuning import digital_tuning, observer_gains
 from bwdesign.model.params import BoucWenParams
 from bwdesign.output.files import prepare_directory
 from bwdesign.sim.closed_loop import simulate
@@ -603,7 +603,7 @@ def _run(args: argparse.Namespace, out: Path) -> int:
         "",
         "(A negative decay rate is an unstable loop.)",
         "",
-        "### Digital tuning (`bwdesign.control.digital_tuning(params, dt)`)",
+        "### Digital tuning (`bwdesign.design.digital_tuning(params, dt)`)",
         "",
         tuning.reasoning + ".",
         "",

@@ -36,12 +36,9 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     from .certify.robust import RobustCertificate, certify_robust
     from .certify.robust_observer import (
         RobustObserverCertificate,
-        RobustObserverSynthesis,
         certify_robust_observer,
         certify_robust_observer_discrete,
-        synthesize_robust_observer,
     )
-    from .certify.synthesis import synthesize
     from .certify.tiers import certify, certify_discrete
     from .codegen.export import CExport, export_c
     from .control.analysis import LoopAnalysis, analyze_loop, mismatch_sweep
@@ -52,7 +49,10 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
         make_controller,
     )
     from .control.loop import ClosedLoop, Start
-    from .control.tuning import DigitalTuning, digital_tuning
+    from .design.gains import synthesize
+    from .design.robust import RobustDesign, RobustSearch, synthesize_robust
+    from .design.robust_observer import RobustObserverSynthesis, synthesize_robust_observer
+    from .design.tuning import DigitalTuning, digital_tuning
     from .identify import IdentificationResult, identify
     from .model.config import ControllerSettings, StageConfig, load_config, load_plant
     from .model.envelope import Envelope, derive_envelope, given_envelope
@@ -73,7 +73,6 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     from .sim.continuous import ContinuousSolver, simulate_continuous
     from .sim.metrics import Metrics, steady_state_window, tracking_metrics
     from .sim.result import SimulationResult
-    from .sim.robust_design import RobustDesign, synthesize_robust
 
 #: Module -> the public names it provides, imported on first access.
 _LAZY: dict[str, tuple[str, ...]] = {
@@ -84,12 +83,9 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".certify.robust": ("RobustCertificate", "certify_robust"),
     ".certify.robust_observer": (
         "RobustObserverCertificate",
-        "RobustObserverSynthesis",
         "certify_robust_observer",
         "certify_robust_observer_discrete",
-        "synthesize_robust_observer",
     ),
-    ".certify.synthesis": ("synthesize",),
     ".certify.tiers": ("certify", "certify_discrete"),
     ".codegen.export": ("CExport", "export_c"),
     ".control.analysis": ("LoopAnalysis", "analyze_loop", "mismatch_sweep"),
@@ -100,7 +96,10 @@ _LAZY: dict[str, tuple[str, ...]] = {
         "make_controller",
     ),
     ".control.loop": ("ClosedLoop", "Start"),
-    ".control.tuning": ("DigitalTuning", "digital_tuning"),
+    ".design.gains": ("synthesize",),
+    ".design.robust": ("RobustDesign", "RobustSearch", "synthesize_robust"),
+    ".design.robust_observer": ("RobustObserverSynthesis", "synthesize_robust_observer"),
+    ".design.tuning": ("DigitalTuning", "digital_tuning"),
     ".identify": ("IdentificationResult", "identify"),
     ".model.config": ("ControllerSettings", "StageConfig", "load_config", "load_plant"),
     ".model.envelope": ("Envelope", "derive_envelope", "given_envelope"),
@@ -127,7 +126,6 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".sim.continuous": ("ContinuousSolver", "simulate_continuous"),
     ".sim.metrics": ("Metrics", "steady_state_window", "tracking_metrics"),
     ".sim.result": ("SimulationResult",),
-    ".sim.robust_design": ("RobustDesign", "synthesize_robust"),
 }
 
 __all__ = [
@@ -195,6 +193,7 @@ __all__ = [
     "RobustCertificate",
     "synthesize_robust",
     "RobustDesign",
+    "RobustSearch",
     "certify_robust_observer",
     "certify_robust_observer_discrete",
     "synthesize_robust_observer",

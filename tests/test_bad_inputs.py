@@ -42,7 +42,8 @@ from bwdesign.certify.disturbance import certify_disturbance
 from bwdesign.certify.robust_observer import certify_robust_observer
 from bwdesign.cli.main import main
 from bwdesign.control.controllers import TrackingController
-from bwdesign.control.tuning import MarginRequirements, digital_tuning
+from bwdesign.design.robust import RobustSearch, synthesize_robust
+from bwdesign.design.tuning import MarginRequirements, digital_tuning
 from bwdesign.errors import ConfigError, GainError, InputError, ParameterError
 from bwdesign.extras import require
 from bwdesign.identify import IdentificationData, identify, load_data
@@ -688,6 +689,25 @@ PYTHON += [
         lambda: digital_tuning(P, 2e-4, observer_radius="fast"),
         InputError,
         "observer_radius must be a number",
+    ),
+    (
+        "RobustSearch max_candidates 0",
+        lambda: RobustSearch(max_candidates=0),
+        InputError,
+        "max_candidates must be >= 1, got 0",
+    ),
+    (
+        "synthesize_robust search dict",
+        lambda: synthesize_robust(
+            P,
+            dt=2e-4,
+            uncertainty=UncertaintyBox.parse("a1=2%"),
+            udot_max=400.0,
+            reference=Sine(amplitude=10.0, offset=10.0, frequency=1.0),
+            search={"max_candidates": 2},
+        ),
+        InputError,
+        "search must be a RobustSearch",
     ),
     (
         "simulate_zoh u_prev str",

@@ -260,7 +260,7 @@ def test_cli_synthesize_small_radius_is_a_well_formed_no(capsys):
 
 def test_design_outside_the_disk_is_rejected_with_the_measured_value():
     """Issue 19's gains for --pole-radius 1: continuous poles -731.6, -0.727 +- 0.998j."""
-    from bwdesign.certify.synthesis import _Attempt, _finish, _Searched
+    from bwdesign.design.gains import _Attempt, _finish, _Searched
 
     p = preset("paper_experiment")
     gains = (19.279, -172524.0, -0.00697595)

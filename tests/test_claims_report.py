@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from bwdesign.cli.main import main
-from bwdesign.control.tuning import digital_tuning
+from bwdesign.design.tuning import digital_tuning
 from bwdesign.errors import UnboundedModelError
 from bwdesign.model.config import load_config
 from bwdesign.report.certified import build_report

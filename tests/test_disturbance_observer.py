@@ -22,7 +22,7 @@ from bwdesign import (
     simulate,
     simulate_zoh,
 )
-from bwdesign.control import digital_tuning
+from bwdesign.design import digital_tuning
 from bwdesign.errors import GainError, InputError
 from bwdesign.observers.gains import discrete_gains
 

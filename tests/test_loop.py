@@ -17,7 +17,7 @@ from bwdesign import (
     simulate,
 )
 from bwdesign.control.analysis import stability_interval
-from bwdesign.control.tuning import MarginRequirements, digital_tuning, observer_gains
+from bwdesign.design.tuning import MarginRequirements, digital_tuning, observer_gains
 from bwdesign.errors import InputError
 from bwdesign.model.plant import discretize
 from bwdesign.observers.gains import discrete_gains, error_matrix

@@ -138,7 +138,7 @@ def test_paper_experiment_64_vertices():
 def test_report_has_the_robust_section(tmp_path):
     """Certified peak bounds beside the corners' steady-state max |error| (like for like)."""
     from bwdesign import ClosedLoop, ObserverSpec, load_config, simulate
-    from bwdesign.control.tuning import digital_tuning
+    from bwdesign.design.tuning import digital_tuning
     from bwdesign.report.certified import build_report
 
     config = load_config("stack_actuator_800hz")

@@ -227,10 +227,10 @@ def test_the_reports_loop_on_the_stack_stage_with_a_late_step(observer):
     delay), the stage's own 64-corner box, a 0 -> 15 um step at 3 s with a 0.5 s rise,
     the envelope by the stage's rule. Before: x3 bound 0.0898 (PHDO) / 0.0702 (PHSO)
     against 0.675 simulated after the step."""
-    from bwdesign.control.tuning import digital_tuning
+    from bwdesign.design.tuning import digital_tuning
     from bwdesign.model.config import load_config
     from bwdesign.model.envelope import derive_envelope
-    from bwdesign.sim.robust_design import simulate_corners
+    from bwdesign.sim import simulate_corners
 
     cfg = load_config("configs/stack_actuator_800hz.toml")
     p, dt, box = cfg.plant, float(cfg.dt), cfg.uncertainty

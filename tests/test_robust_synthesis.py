@@ -11,10 +11,10 @@ import pytest
 
 from bwdesign import ClosedLoop, ObserverSpec, Sine, Start, UncertaintyBox, preset
 from bwdesign.control.controllers import make_controller
-from bwdesign.control.tuning import digital_tuning
+from bwdesign.design.robust import RobustSearch, synthesize_robust
+from bwdesign.design.tuning import digital_tuning
 from bwdesign.errors import InputError, ParameterError
 from bwdesign.sim.batch import simulate_batch
-from bwdesign.sim.robust_design import synthesize_robust
 
 DT = 2e-4
 REF = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
@@ -82,7 +82,8 @@ def _worst_corner(params, box, design):
 def test_robust_design_on_a_custom_stage_is_certified_and_covers_the_corners():
     p = _custom()
     box = _box(a1=0.02, a3=0.02, alpha=0.1)
-    d = synthesize_robust(p, dt=DT, uncertainty=box, udot_max=UDOT, reference=REF, max_candidates=2)
+    two = RobustSearch(max_candidates=2)
+    d = synthesize_robust(p, dt=DT, uncertainty=box, udot_max=UDOT, reference=REF, search=two)
     assert d.feasible, d.reason
     assert d.observer == "phdo" and len(d.gains) == 4 and d.gains[2] == 0.0
     assert d.certificate.holds and d.certificate.n_vertices == 8
@@ -106,7 +107,7 @@ def test_robust_design_on_a_custom_stage_is_certified_and_covers_the_corners():
 def test_a_box_too_wide_has_no_robust_design_with_the_reason():
     p = _custom()
     d = synthesize_robust(
-        p, dt=DT, uncertainty=_box(a3=0.95), udot_max=UDOT, reference=REF, max_candidates=1
+        p, dt=DT, uncertainty=_box(a3=0.95), udot_max=UDOT, reference=REF, search=RobustSearch(1)
     )
     assert not d.feasible and d.gains is None
     assert d.reason.startswith("no robust design")
@@ -117,9 +118,13 @@ def test_bad_arguments_are_typed_errors():
     p = preset("paper_experiment")
     with pytest.raises(InputError, match="UncertaintyBox"):
         synthesize_robust(p, dt=DT, uncertainty=None, udot_max=UDOT, reference=REF)
-    with pytest.raises(InputError, match="max_candidates"):
+    with pytest.raises(InputError, match="max_candidates must be >= 1"):
+        RobustSearch(max_candidates=0)
+    with pytest.raises(InputError, match="max_candidates must be an integer"):
+        RobustSearch(max_candidates=True)
+    with pytest.raises(InputError, match="search must be a RobustSearch"):
         synthesize_robust(
-            p, dt=DT, uncertainty=_box(a1=0.02), udot_max=UDOT, reference=REF, max_candidates=0
+            p, dt=DT, uncertainty=_box(a1=0.02), udot_max=UDOT, reference=REF, search={"n": 2}
         )
 
 
@@ -237,8 +242,8 @@ def test_a_phso_loop_that_chatters_at_a_corner_is_certified_only_at_the_rate_it_
         uncertainty=_box(a1=0.02, a3=0.02),
         udot_max=UDOT,
         reference=REF,
-        max_candidates=1,
         observer="phso",
+        search=RobustSearch(max_candidates=1),
     )
     (c,) = d.candidates
     assert c["simulated_udot_max"] > 3 * UDOT

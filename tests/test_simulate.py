@@ -22,7 +22,7 @@ from bwdesign import (
     simulate_continuous,
 )
 from bwdesign.cli.main import main
-from bwdesign.control.tuning import observer_gains
+from bwdesign.design.tuning import observer_gains
 from bwdesign.errors import GainError, InputError, UnboundedModelError
 from bwdesign.output.jsonenc import json_safe
 from bwdesign.sim.continuous import _solve_udot

@@ -27,6 +27,7 @@ from bwdesign import (
 )
 from bwdesign.cli.main import main
 from bwdesign.control.loop import ON_REFERENCE
+from bwdesign.design import stage_tuning
 from bwdesign.errors import ConfigError, InputError, ParameterError
 from bwdesign.model.config import load_config
 from bwdesign.model.envelope import derive_envelope
@@ -353,6 +354,28 @@ def test_the_sweep_box_comes_from_the_stage_or_the_argument():
     undetermined = UncertaintyBox.from_dict({"a1": {"rel": float("inf")}})
     with pytest.raises(ParameterError, match="a1 not determined"):
         sweep_box(bare, undetermined)
+
+
+def test_the_sweep_runs_the_law_its_caller_tuned():
+    """spec_from_config chooses no gains: the law it is given, else the stage's own."""
+    config = load_config("configs/paper_experiment.toml")
+    box = UncertaintyBox.parse("a1=2%")
+    law = stage_tuning(config, "digital")
+    assert law.gains == digital_tuning(config.plant, config.dt).gains
+    tuned = spec_from_config(config, law=law, uncertainty=box)
+    assert tuned.gains == law.gains != tuple(config.gains)
+    assert tuned.loop.controller.lambda1 == law.lambda1
+    assert stage_tuning(config, "config") is None
+    assert spec_from_config(config, uncertainty=box).gains == tuple(config.gains)
+    with pytest.raises(InputError, match="tuning must be 'config' or 'digital'"):
+        stage_tuning(config, "fast")
+    with pytest.raises(ConfigError, match=r"the digital tuning needs \[sampling\] dt"):
+        stage_tuning(replace(config, dt=None), "digital")
+    with pytest.raises(ConfigError, match=r"a sweep needs \[observer\] gains"):
+        spec_from_config(replace(config, gains=None), uncertainty=box)
+    assert spec_from_config(replace(config, gains=None), law=law, uncertainty=box).gains == (
+        law.gains
+    )
 
 
 def test_a_stage_sweep_compares_with_the_stages_envelope(tmp_path):

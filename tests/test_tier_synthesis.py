@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from bwdesign import preset, synthesize
-from bwdesign.certify.tier_synthesis import _cl, _scaled
 from bwdesign.cli.main import main
+from bwdesign.design.tiers import _cl, _scaled
 from bwdesign.errors import InputError, UnboundedModelError
 from bwdesign.observers.gains import discrete_gains, error_matrix
 

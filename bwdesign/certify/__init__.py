@@ -1,5 +1,5 @@
-"""Certificates: result types, the four tiers, LMI synthesis (the only cvxpy, in :mod:`.lmi`) and
-the linear analysis of the error dynamics.
+"""Certificates: result types, the four tiers, the LMI programs (the only cvxpy, in :mod:`.lmi`)
+and the linear analysis of the error dynamics (gain synthesis is in :mod:`bwdesign.design`).
 """
 
 from .checks import continuous_equivalent, rho_interval, sector_interval
@@ -22,12 +22,9 @@ from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCert
 from .robust import RobustCertificate, certify_robust
 from .robust_observer import (
     RobustObserverCertificate,
-    RobustObserverSynthesis,
     certify_robust_observer,
     certify_robust_observer_discrete,
-    synthesize_robust_observer,
 )
-from .synthesis import default_pole_radius, synthesize
 from .tiers import certify, certify_discrete
 
 __all__ = [
@@ -45,11 +42,7 @@ __all__ = [
     "RobustCertificate",
     "certify_robust_observer",
     "certify_robust_observer_discrete",
-    "synthesize_robust_observer",
     "RobustObserverCertificate",
-    "RobustObserverSynthesis",
-    "synthesize",
-    "default_pole_radius",
     "ErrorDynamics",
     "HysteresisBode",
     "error_system",

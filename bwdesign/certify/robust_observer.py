@@ -1,4 +1,7 @@
-"""Robust certificate of the sampled observer error over an uncertainty box, and its synthesis.
+"""Robust certificate of the sampled observer error over an uncertainty box.
+
+Its synthesis (gains minimising the certified bound) is
+:func:`bwdesign.design.synthesize_robust_observer`.
 
 The observer is the sampled PHSO (predict/update, ``K = discrete_gains(model, l, dt)``)
 built on the *model* ``params``; the true plant is any point ``theta`` of the
@@ -55,34 +58,31 @@ certificate.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from scipy.linalg import matrix_balance, solve_discrete_lyapunov
 
-from ..errors import GainError, InputError
+from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import as_gains, check_gains, discrete_gains
-from ..validate import NONNEGATIVE, POLE_RADIUS, SIGNAL, UDOT_MAX, integer, real
-from .checks import continuous_equivalent, rho_interval
+from ..validate import NONNEGATIVE, SIGNAL, UDOT_MAX, integer, real
+from .checks import rho_interval
 from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction
 from .results import CONTRACTION, Margin
 
 __all__ = [
     "RobustObserverCertificate",
-    "RobustObserverSynthesis",
+    "RobustObserverProblem",
     "certify_robust_observer",
     "certify_robust_observer_discrete",
-    "synthesize_robust_observer",
+    "robust_observer_problem",
 ]
 
 _C = np.array([1.0, 0.0, 0.0])
-#: Contractions per sample tried first by the synthesis (then refined).
-_GRID = (0.5, 0.8, 0.9, 0.95, 0.98, 0.99, 0.995, 0.998)
 
 
 @dataclass(frozen=True)
@@ -227,7 +227,7 @@ def _mismatch_bound(
 
 
 @dataclass(frozen=True)
-class _Problem:
+class RobustObserverProblem:
     """Everything but the gain: channels (unscaled), rho ends, scaling, box bookkeeping."""
 
     F: np.ndarray
@@ -250,7 +250,7 @@ def _problem(
     noise_max: float,
     interior_samples: int,
     seed: int,
-) -> _Problem:
+) -> RobustObserverProblem:
     require_bounded(params)
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
     noise_max = real(noise_max, "noise_max", within=NONNEGATIVE)
@@ -283,7 +283,9 @@ def _problem(
             f"the box is too wide: {len(outside)} of its {len(vertices)} corners leave the "
             f"bounded class ({outside[0].name}: {outside[0].bounded_class().reason})"
         )
-        return _Problem(F, np.zeros((3, 3)), noise_max, rho, {}, base, {"dt": dt}, reason)
+        return RobustObserverProblem(
+            F, np.zeros((3, 3)), noise_max, rho, {}, base, {"dt": dt}, reason
+        )
     du = udot_max * dt
     per = []
     for tp in [*vertices, *interior]:
@@ -294,7 +296,7 @@ def _problem(
     W = per.max(axis=0)
     exceeds = bool(interior) and bool(np.any(per[nv:].max(axis=0) > per[:nv].max(axis=0)))
     Bw = np.column_stack([F[:, 2] * W[0], np.eye(3)[:, 0] * W[1], np.eye(3)[:, 1] * W[2]])
-    return _Problem(
+    return RobustObserverProblem(
         F=F,
         Bw=Bw,
         noise=noise_max,
@@ -310,7 +312,37 @@ def _problem(
     )
 
 
-def _blocks(pb: _Problem, K: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+def robust_observer_problem(
+    params: BoucWenParams,
+    *,
+    dt: float,
+    uncertainty: UncertaintyBox,
+    udot_max: float,
+    input_range: tuple[float, float],
+    noise_max: float = 0.0,
+    interior_samples: int = 16,
+    seed: int = 0,
+) -> RobustObserverProblem:
+    """The gain-free part of :func:`certify_robust_observer`'s problem, checked.
+
+    The error channels, the jump-slope ends ``rho`` and the input bounds over the box
+    (``refused`` says why there is no certificate for any gain); the synthesis
+    (:func:`bwdesign.design.synthesize_robust_observer`) solves for the gain on it.
+    Parameters as :func:`certify_robust_observer`.
+    """
+    return _problem(
+        params,
+        dt=check_sample_time(params, dt),
+        uncertainty=uncertainty,
+        udot_max=udot_max,
+        input_range=input_range,
+        noise_max=noise_max,
+        interior_samples=interior_samples,
+        seed=seed,
+    )
+
+
+def _blocks(pb: RobustObserverProblem, K: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
     G = np.eye(3) - np.outer(K, _C)
     A = [G @ pb.F @ np.diag([1.0, 1.0, r]) for r in pb.rho]
     B = np.column_stack([G @ pb.Bw, K * pb.noise])
@@ -340,7 +372,7 @@ def _check(Q: np.ndarray, lam: np.ndarray, a: float, blocks) -> list[Margin]:
 
 
 def _not(
-    pb: _Problem, status: str, a: float, solver: str = "", **extra
+    pb: RobustObserverProblem, status: str, a: float, solver: str = "", **extra
 ) -> RobustObserverCertificate:
     return RobustObserverCertificate(
         holds=False,
@@ -356,7 +388,9 @@ def _not(
     )
 
 
-def _certify_K(pb: _Problem, K: np.ndarray, a: float | None) -> RobustObserverCertificate:
+def _certify_K(
+    pb: RobustObserverProblem, K: np.ndarray, a: float | None
+) -> RobustObserverCertificate:
     from . import lmi
 
     rho_lo, rho_hi = pb.rho
@@ -516,9 +550,11 @@ def certify_robust_observer(
     """
     dt = check_sample_time(params, dt)
     K = discrete_gains(params, check_gains(params, gains), dt)
-    opts = {"dt": dt, "uncertainty": uncertainty, "udot_max": udot_max, "input_range": input_range}
-    return _certify_K(_problem(params, noise_max=noise_max, interior_samples=interior_samples,
-                               seed=seed, **opts), np.asarray(K, float), a)  # fmt: skip
+    pb = robust_observer_problem(
+        params, dt=dt, uncertainty=uncertainty, udot_max=udot_max, input_range=input_range,
+        noise_max=noise_max, interior_samples=interior_samples, seed=seed,
+    )  # fmt: skip
+    return _certify_K(pb, np.asarray(K, float), a)
 
 
 def certify_robust_observer_discrete(
@@ -539,216 +575,9 @@ def certify_robust_observer_discrete(
     For a design whose discrete poles have no continuous equivalent (a synthesis in the
     z-plane). ``K`` is the predict/update gain; the other parameters as there.
     """
-    dt = check_sample_time(params, dt)
     K = np.asarray(as_gains(K, "discrete gains K"), float)
-    opts = {"dt": dt, "uncertainty": uncertainty, "udot_max": udot_max, "input_range": input_range}
-    return _certify_K(_problem(params, noise_max=noise_max, interior_samples=interior_samples,
-                               seed=seed, **opts), K, a)  # fmt: skip
-
-
-@dataclass(frozen=True)
-class RobustObserverSynthesis:
-    """Observer gains minimising the certified bound over a box, or a clear "no".
-
-    Attributes
-    ----------
-    feasible : bool
-        Gains were found *and* :func:`certify_robust_observer` certified them.
-    gains : tuple of 3 floats or None
-        The exact continuous equivalent of ``K`` (1/s, 1/s^2, 1/s), ``None`` when the
-        discrete poles have none (the reason says so).
-    discrete_gains : tuple of 3 floats or None
-        ``K`` (rounded to 10 significant digits, the numbers re-certified).
-    certificate : RobustObserverCertificate or None
-        The re-certification (its bounds are the ones to quote).
-    target : str
-        ``"x1"`` or ``"x3"``: the estimation error whose bound was minimised.
-    lmi_bound : float or None
-        The bound the LMI reached (length unit), before the re-certification.
-    reason : str
-    solver, status : str
-    """
-
-    feasible: bool
-    gains: tuple[float, float, float] | None
-    discrete_gains: tuple[float, float, float] | None
-    certificate: RobustObserverCertificate | None
-    target: str
-    lmi_bound: float | None
-    reason: str
-    solver: str = ""
-    status: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "feasible": self.feasible,
-            "gains": None if self.gains is None else list(self.gains),
-            "discrete_gains": None if self.discrete_gains is None else list(self.discrete_gains),
-            "certificate": None if self.certificate is None else self.certificate.to_dict(),
-            "target": self.target,
-            "lmi_bound": self.lmi_bound,
-            "reason": self.reason,
-            "solver": self.solver,
-            "status": self.status,
-        }
-
-
-def synthesize_robust_observer(
-    params: BoucWenParams,
-    *,
-    dt: float,
-    uncertainty: UncertaintyBox,
-    udot_max: float,
-    input_range: tuple[float, float],
-    noise_max: float = 0.0,
-    target: str = "x3",
-    pole_radius: float | None = None,
-    interior_samples: int = 16,
-    seed: int = 0,
-) -> RobustObserverSynthesis:
-    """Discrete PHSO gains minimising the certified steady estimation-error bound over a box.
-
-    The LMI :func:`bwdesign.certify.lmi.robust_observer_synthesis` is the certificate's
-    inequality in the posterior form with ``Y = P K`` (affine in ``(P, Y, lam)`` for a
-    fixed contraction ``a``, searched by golden section on ``log(1 - a)``), in the state
-    scaling ``diag(1, sqrt(a1), 1)`` of the nominal sampled synthesis. With
-    ``pole_radius`` (rad/s) the nominal discrete poles are kept in the disk ``|z - 1| <
-    1 - exp(-pole_radius dt)`` (as :func:`bwdesign.synthesize`: it keeps them off the
-    negative real axis, so the exact continuous equivalent of ``K`` exists). ``K`` is
-    rounded to 10 significant digits and re-certified by
-    :func:`certify_robust_observer` (with the continuous equivalent when it exists,
-    else :func:`certify_robust_observer_discrete` of ``K``) before it is called feasible.
-
-    Parameters
-    ----------
-    params, dt, uncertainty, udot_max, input_range, noise_max, interior_samples, seed
-        As :func:`certify_robust_observer`.
-    target : {"x3", "x1"}
-        The estimation error whose certified bound is minimised.
-    pole_radius : float, optional
-        Pole-disk radius (rad/s); default none (any Schur-stable ``K``).
-
-    Returns
-    -------
-    RobustObserverSynthesis
-    """
-    if target not in ("x1", "x3"):
-        raise InputError(f"target must be 'x1' or 'x3', got {target!r}")
-    dt = check_sample_time(params, dt)
-    opts = {
-        "dt": dt,
-        "uncertainty": uncertainty,
-        "udot_max": udot_max,
-        "input_range": input_range,
-        "noise_max": noise_max,
-        "interior_samples": interior_samples,
-        "seed": seed,
-    }
-    pb = _problem(params, **opts)
-    disk = None
-    if pole_radius is not None:
-        R = real(pole_radius, "pole_radius (rad/s)", within=POLE_RADIUS)
-        disk = (1.0, -math.expm1(-R * dt))
-    if pb.refused or not all(math.isfinite(v) for v in pb.input_bounds.values()):
-        why = pb.refused or "an input bound is infinite (the hysteresis mismatch at this rate)"
-        return RobustObserverSynthesis(
-            False, None, None, None, target, None, f"not certified: {why}"
-        )
-    T = np.array([1.0, math.sqrt(params.a1), 1.0])
-    cache = _synthesis_lmis(pb, T, target, disk)
-    ok = [v for v in cache.values() if v[0].ok]
-    if not ok:
-        last = next(iter(cache.values()))[0]
-        return RobustObserverSynthesis(
-            False,
-            None,
-            None,
-            None,
-            target,
-            None,
-            f"the synthesis LMI has no solution for any contraction tried ({last.status})",
-            last.solver,
-            last.status,
-        )
-    sol, obj, av = min(ok, key=lambda v: v[1])
-    opts["a"] = av  # re-certify at the synthesis' contraction (its P is feasible there)
-    P = np.asarray(sol["P"])
-    Ks = np.linalg.solve((P + P.T) / 2, np.asarray(sol["Y"]).reshape(3))
-    K = tuple(float(f"{v:.10g}") for v in T * Ks)
-    gains, cert, note = _recertify(params, K, opts)
-    bound = (
-        None
-        if not cert.holds
-        else (cert.x3_estimation_bound if target == "x3" else cert.estimation_bound)
-    )
-    reason = (
-        f"K = ({', '.join(f'{k:.6g}' for k in K)}) certified over the box: steady "
-        f"|{target}hat - {target}| <= {bound:.4g} (length unit){note}"
-        if cert.holds
-        else f"the synthesised gains did not pass re-certification ({cert.status}){note}"
-    )
-    return RobustObserverSynthesis(
-        feasible=cert.holds,
-        gains=None if gains is None else tuple(float(g) for g in gains),
-        discrete_gains=K,
-        certificate=cert,
-        target=target,
-        lmi_bound=math.sqrt(max(obj, 0.0)),
-        reason=reason,
-        solver=sol.solver,
-        status=sol.status,
-    )
-
-
-def _synthesis_lmis(
-    pb: _Problem, T: np.ndarray, target: str, disk: tuple[float, float] | None
-) -> dict[float, Any]:
-    """The synthesis LMI over the contraction search: ``{log(1 - a): (sol, objective, a)}``.
-
-    Solved in the state scaling ``T = diag(1, sqrt(a1), 1)``; the objective is the
-    squared peak of the ``target`` error (``inf`` where the solve failed).
-    """
-    from . import lmi
-
-    Fs = pb.F * T[None, :] / T[:, None]
-    Bs = pb.Bw / T[:, None]
-    c = T * (_C if target == "x1" else np.eye(3)[2])
-    cache: dict[float, Any] = {}
-
-    def f(x: float) -> float:
-        if x not in cache:
-            sol = lmi.robust_observer_synthesis(
-                Fs, Bs, c, rho=pb.rho, a=1 - math.exp(x), noise=pb.noise, disk=disk
-            )
-            cache[x] = (sol, sol.objective if sol.ok else math.inf, 1 - math.exp(x))
-        return cache[x][1]
-
-    search_log_contraction(f, [math.log(1 - a) for a in _GRID], 5)
-    return cache
-
-
-def _recertify(
-    params: BoucWenParams, K: tuple[float, ...], opts: dict[str, Any]
-) -> tuple[np.ndarray | None, RobustObserverCertificate, str]:
-    """``(continuous gains or None, certificate, note)`` of the rounded synthesised ``K``.
-
-    Certified with its exact continuous equivalent when one exists and is admissible,
-    else with :func:`certify_robust_observer_discrete`.
-    """
-    with warnings.catch_warnings():  # logm's accuracy note: the result is verified anyway
-        warnings.simplefilter("ignore", RuntimeWarning)
-        gains = continuous_equivalent(params, K, opts["dt"])
-    try:
-        if gains is not None:
-            cert = certify_robust_observer(params, gains, **opts)
-        else:
-            cert = certify_robust_observer_discrete(params, K, **opts)
-    except GainError as err:  # continuous equivalent outside the Hurwitz conditions (4)
-        gains = None
-        cert = certify_robust_observer_discrete(params, K, **opts)
-        note = f" (its continuous equivalent is not admissible: {err})"
-    else:
-        note = (
-            "" if gains is not None else "; the discrete poles have no exact continuous equivalent"
-        )
-    return gains, cert, note
+    pb = robust_observer_problem(
+        params, dt=dt, uncertainty=uncertainty, udot_max=udot_max, input_range=input_range,
+        noise_max=noise_max, interior_samples=interior_samples, seed=seed,
+    )  # fmt: skip
+    return _certify_K(pb, K, a)

@@ -16,8 +16,8 @@ import argparse
 import math
 
 from ..certify.results import CertificateReport, SynthesisResult
-from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
+from ..design.gains import synthesize
 from ..model.config import load_config
 from ..output.jsonenc import dump_json
 from .args import (
@@ -134,7 +134,7 @@ def synthesize_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="design the sampled tracking loop (observer gains, lambda, integral rate) against "
         "the stage file's [uncertainty] box and certify it over every corner "
-        "(bwdesign.sim.robust_design); needs [uncertainty], [reference] and a dt",
+        "(bwdesign.design.robust); needs [uncertainty], [reference] and a dt",
     )
     p.add_argument(
         "--noise-max",

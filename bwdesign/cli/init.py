@@ -19,7 +19,7 @@ import tomllib
 from typing import Any
 
 from .._version import __version__
-from ..certify.synthesis import default_pole_radius
+from ..design.gains import default_pole_radius
 from ..errors import ConfigError
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.requirements import REQUIREMENT_KEYS, SETTING_KEYS

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import argparse
 
+from ..design.robust import RobustDesign, synthesize_robust
 from ..output.jsonenc import dump_json
-from ..sim.robust_design import RobustDesign, synthesize_robust
 from .args import EXIT_NO, EXIT_OK, UsageError
 from .stage import Stage
 

@@ -12,7 +12,7 @@ UKF's ``--udot-max``) are the defaults of the options not given; what was
 taken from the file is printed. An option that does not apply to the run is
 an error.
 
-``--tuning digital`` runs the loop with :func:`bwdesign.control.digital_tuning`
+``--tuning digital`` runs the loop with :func:`bwdesign.design.digital_tuning`
 chosen for the stage, ``--dt`` and ``--delay`` (observer gains for the chosen
 ``--observer``, eq. (12) discrete form, lambdas, integral action); then
 ``--gains``, ``--lambda1``, ``--lambda2``, ``--form`` and ``--integral-rate`` are
@@ -30,7 +30,7 @@ import numpy as np
 
 from ..control.controllers import TuningWarning, make_controller
 from ..control.loop import ON_REFERENCE, ClosedLoop, Start
-from ..control.tuning import digital_tuning
+from ..design.tuning import digital_tuning
 from ..model.config import load_plant
 from ..model.params import BoucWenParams
 from ..model.references import Reference, Sine, Step, Triangle
@@ -128,7 +128,7 @@ def _loop_args(p: argparse.ArgumentParser) -> None:
         "--tuning",
         choices=("digital",),
         default=None,
-        help="digital: gains, lambdas and integral action from bwdesign.control.digital_tuning "
+        help="digital: gains, lambdas and integral action from bwdesign.design.digital_tuning "
         "for this stage, --dt, --delay and --observer (no --gains, --lambda1, --lambda2)",
     )
     p.add_argument(

@@ -11,6 +11,7 @@ import argparse
 import math
 import sys
 
+from ..design.tuning import stage_tuning
 from ..extras import require
 from ..model.config import load_config
 from ..model.uncertainty import UncertaintyBox
@@ -156,7 +157,7 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
 def _spec(config, args, observers, box) -> SweepSpec:
     return spec_from_config(
         config,
-        tuning=args.tuning,
+        law=stage_tuning(config, args.tuning),
         form=args.form,
         observers=observers,
         noise_std=args.noise_std,

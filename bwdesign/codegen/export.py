@@ -48,11 +48,11 @@ from typing import Any
 from .._version import __version__
 from ..certify.disturbance import LumpedCertificate, certify_disturbance
 from ..certify.results import CertificateReport
-from ..certify.synthesis import synthesize as synthesize_gains
 from ..certify.tiers import certify, certify_discrete
 from ..control.controllers import DiscreteTrackingController
 from ..control.loop import controller_from_config
-from ..control.tuning import digital_tuning
+from ..design.gains import synthesize as synthesize_gains
+from ..design.tuning import digital_tuning
 from ..errors import ConfigError, InputError, InternalError, NotCertifiedError
 from ..model.config import StageConfig
 from ..model.params import require_bounded

@@ -1,5 +1,5 @@
-"""Tracking control: the eq. 12 controllers, loop systems and loop analysis, mismatch sweeps and
-the digital tuning.
+"""Tracking control: the eq. 12 controllers, the closed loop, loop systems and loop analysis, and
+mismatch sweeps (the digital tuning, which chooses gains, is in :mod:`bwdesign.design`).
 """
 
 from .analysis import LoopAnalysis, MismatchSweep, analyze_loop, mismatch_sweep, stability_interval
@@ -16,7 +16,6 @@ from .controllers import (
     solve_jump,
 )
 from .systems import closed_loop_matrix, loop_systems
-from .tuning import DigitalTuning, MarginRequirements, digital_tuning, observer_gains
 
 __all__ = [
     "TrackingController",
@@ -36,8 +35,4 @@ __all__ = [
     "analyze_loop",
     "mismatch_sweep",
     "stability_interval",
-    "observer_gains",
-    "digital_tuning",
-    "DigitalTuning",
-    "MarginRequirements",
 ]

@@ -50,12 +50,14 @@ divergence; it never raises.
 
 :func:`simulate_batch` runs the sampled-data loop for many true plants at once
 (vectorised over scenarios; the Monte Carlo sweep's engine) and returns a
-:class:`BatchResult`.
+:class:`BatchResult`; :func:`simulate_corners` runs it at the corners of an
+uncertainty box.
 """
 
 from .batch import BatchResult, simulate_batch
 from .closed_loop import make_observer, simulate
 from .continuous import ContinuousSolver, simulate_continuous
+from .corners import simulate_corners
 from .metrics import Metrics, steady_state_window, tracking_metrics
 from .result import SimulationResult
 
@@ -66,6 +68,7 @@ __all__ = [
     "SimulationResult",
     "simulate",
     "simulate_batch",
+    "simulate_corners",
     "BatchResult",
     "make_observer",
     "simulate_continuous",

@@ -554,7 +554,7 @@ def _run_dask(spec, pieces, slices, workers, scheduler, retries, timeout, progre
 def spec_from_config(
     config: Any,
     *,
-    tuning: str = "config",
+    law: Any = None,
     form: str = "continuous",
     observers: Sequence[str] = ("phso", "eso"),
     noise_std: float = 0.0,
@@ -563,22 +563,19 @@ def spec_from_config(
     start: str = "reference",
     uncertainty: UncertaintyBox | None = None,
 ) -> SweepSpec:
-    """The sweep of a stage's loop: ``tuning="config"`` runs the ``[observer]`` gains and
-    ``[controller]`` constants (eq. 12 in ``form``), ``"digital"`` the digital tuning
-    (:func:`bwdesign.digital_tuning`); ``[controller]`` limits apply in both. ``duration``
-    defaults to three reference periods, at least 1 s. ``udot_max`` is the stage's
-    ``[envelope]`` (the one its certificates assume), else the envelope the reference
-    itself needs (:func:`bwdesign.derive_envelope`, margin 1). The box is
+    """The sweep of a stage's loop: without ``law`` the ``[observer]`` gains and
+    ``[controller]`` constants (eq. 12 in ``form``), else the tuned law its caller chose
+    (a :class:`bwdesign.DigitalTuning`, e.g. :func:`bwdesign.design.stage_tuning`: the
+    sweep simulates gains, it does not choose them); ``[controller]`` limits apply in
+    both. ``duration`` defaults to three reference periods, at least 1 s. ``udot_max`` is
+    the stage's ``[envelope]`` (the one its certificates assume), else the envelope the
+    reference itself needs (:func:`bwdesign.derive_envelope`, margin 1). The box is
     ``uncertainty``, else the stage's ``[uncertainty]`` (:func:`sweep_box`).
     """
-    from ..control.tuning import digital_tuning
-
-    if tuning not in ("config", "digital"):
-        raise InputError(f"tuning must be 'config' or 'digital', got {tuning!r}")
     missing = [
         s for s, v in (("[sampling] dt", config.dt), ("[reference]", config.reference)) if v is None
     ]
-    if tuning == "config":
+    if law is None:
         if config.gains is None:
             missing.append("[observer] gains (or the digital tuning)")
         if config.controller is None:
@@ -588,7 +585,6 @@ def spec_from_config(
     box = sweep_box(config, uncertainty)
     if start not in ("reference", "rest"):
         raise InputError(f"start must be 'reference' or 'rest', got {start!r}")
-    law = digital_tuning(config.plant, config.dt) if tuning == "digital" else None
     gains = tuple(float(g) for g in (law.gains if law is not None else config.gains))
     loop = ClosedLoop.from_config(
         config,

@@ -14,11 +14,11 @@ from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 from ..certify.linear import error_dynamics, hysteresis_bode
-from ..certify.synthesis import synthesize
 from ..certify.tiers import certify
 from ..control.analysis import analyze_loop
 from ..control.loop import ClosedLoop
-from ..control.tuning import digital_tuning
+from ..design.gains import synthesize
+from ..design.tuning import digital_tuning
 from ..errors import ConfigError, InputError
 from ..model.config import StageConfig
 from ..model.params import require_bounded
@@ -272,7 +272,9 @@ def _loop(r: _Run) -> LoopStudy:
     gains = r.loop_gains()
     r.say("tracking-loop analysis (continuous, sampled, digital tuning)")
     ctl = r.config.controller
-    sampled = ClosedLoop.from_config(r.config, gains=gains, saturate=False)
+    sampled = ClosedLoop.from_config(
+        r.config, gains=gains, saturate=False, allow_unbounded=r.allow_unbounded
+    )
     return LoopStudy(
         lambda1=ctl.lambda1,
         lambda2=ctl.lambda2,

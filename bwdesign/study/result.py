@@ -20,7 +20,7 @@ from ..certify.linear import ErrorDynamics, HysteresisBode
 from ..certify.results import CertificateReport, SynthesisResult
 from ..certify.robust import RobustCertificate
 from ..control.analysis import LoopAnalysis
-from ..control.tuning import DigitalTuning
+from ..design.tuning import DigitalTuning
 from ..errors import InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope

@@ -12,7 +12,7 @@ periods), as the certified bounds are peak bounds after the transient.
 A robust certificate assumes the loop keeps ``|u'| <= udot_max`` and does not
 prove it: the corners are simulated first, and when their input moves faster than
 the stage's envelope the certificate is asked for
-:func:`bwdesign.sim.robust_design.certified_envelope` of their fastest rate.
+:func:`bwdesign.design.certified_envelope` of their fastest rate.
 """
 
 from __future__ import annotations
@@ -23,9 +23,10 @@ import numpy as np
 
 from ..certify.robust import certify_robust
 from ..control.loop import ClosedLoop
-from ..control.tuning import DigitalTuning
+from ..design.robust import certified_envelope
+from ..design.tuning import DigitalTuning
 from ..model.config import StageConfig
-from ..sim.robust_design import certified_envelope, simulate_corners
+from ..sim.corners import simulate_corners
 from .result import RobustLoop, RobustStudy
 
 __all__ = ["robust_study", "robust_loop", "ROBUST_OBSERVERS"]

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..design.tuning import stage_tuning
 from ..errors import ConfigError, InputError
 from ..model.config import StageConfig
 from ..sim.sweep import check_samples, draw_scenarios, run_sweep, spec_from_config, sweep_box
@@ -99,7 +100,7 @@ def stage_sweep(config: StageConfig) -> SweepStudy:
     tuning = cfg.get("tuning", "config")
     spec = spec_from_config(
         config,
-        tuning=tuning,
+        law=stage_tuning(config, tuning),
         observers=cfg.get("observers", ("phso", "eso")),
         noise_std=cfg.get("noise_std_um", 0.0),
         duration=cfg.get("duration_s"),

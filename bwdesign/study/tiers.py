@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..certify.results import SynthesisResult
-from ..certify.synthesis import synthesize
+from ..design.gains import synthesize
 from ..model.params import BoucWenParams
 
 __all__ = ["TierSynthesis", "synthesize_per_tier", "search_requested_rate", "SEARCH_RTOL"]
@@ -140,7 +140,7 @@ def synthesize_per_tier(
         Sample time (s); the ``sampled`` tier only with it.
     pole_radius : float, optional
         Pole-disk radius (rad/s) of the sector and sampled syntheses (default
-        :func:`bwdesign.certify.synthesis.default_pole_radius`).
+        :func:`bwdesign.design.default_pole_radius`).
     allow_unbounded : bool
 
     Returns

@@ -117,7 +117,7 @@ def tracking_runs(
     gains : array_like, shape (3,)
         Observer gains of the eq. 12 runs (1/s, 1/s^2, 1/s); the PHDO runs with
         ``disturbance_gains_from(gains)``.
-    tuning : bwdesign.control.DigitalTuning
+    tuning : bwdesign.design.DigitalTuning
         The digital tuning's constants and gains (the PHDO's from
         ``tuning.observer_gains_for("phdo")``).
     allow_unbounded : bool

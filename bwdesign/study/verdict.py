@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from ..certify.results import CertificateReport, SynthesisResult
-from ..control.tuning import DigitalTuning
+from ..design.tuning import DigitalTuning
 from ..model.config import StageConfig
 from ..output.text import fmt, gains_text, limits_text
 from .result import InputRange, Recommendation, Verdict

@@ -19,7 +19,7 @@ Conventions
   and minimises the gains so that the design is unique.)
 - Homogeneous programs are normalised by ``P <= I``.
 - Solvers: Clarabel first, SCS as fall-back (the synthesis programs use
-  Clarabel only: :mod:`bwdesign.certify.synthesis` falls back on an exact pole search, which is
+  Clarabel only: :mod:`bwdesign.design.gains` falls back on an exact pole search, which is
   faster and more reliable than SCS on those programs). Only ``OPTIMAL`` is accepted;
   ``OPTIMAL_INACCURATE`` is reported as unverified. Solver exceptions are caught
   and turned into a status string; they never escape as a traceback.

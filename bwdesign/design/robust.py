@@ -4,7 +4,7 @@
 constants of the sampled PHSO loop *for the box*, not for the nominal point, and
 returns only a design whose robust certificate holds:
 
-1. :func:`bwdesign.control.digital_tuning` with ``uncertainty=box``: every
+1. :func:`bwdesign.design.digital_tuning` with ``uncertainty=box``: every
    (observer bandwidth, lambda) candidate's gain, phase and delay margins are
    checked at every distinct ``(a1, a2, a3)`` corner of the box (not the fixed
    +-2 % of the nominal tuning).
@@ -19,7 +19,7 @@ returns only a design whose robust certificate holds:
 4. The certificate assumes the loop keeps ``|u'| <= udot_max`` (it bounds the
    hysteresis through the input rate) and does not prove it. Each candidate is
    therefore first simulated at every corner of the box
-   (:func:`bwdesign.sim.simulate_batch`, started on the reference, three
+   (:func:`bwdesign.sim.simulate_corners`, started on the reference, three
    periods, statistics after the first): a diverging corner rejects it, and
    when the corners' input moves faster than ``udot_max`` the certificate is
    asked for ``ENVELOPE_MARGIN`` times their fastest rate instead (a wider
@@ -47,7 +47,6 @@ import numpy as np
 from ..certify.robust import RobustCertificate, certify_robust
 from ..control.controllers import make_controller
 from ..control.loop import ON_REFERENCE, ClosedLoop
-from ..control.tuning import DigitalTuning, digital_tuning
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.plant import check_sample_time
@@ -55,13 +54,14 @@ from ..model.references import Reference
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_gains, gains_for_observer
 from ..observers.spec import ObserverSpec
+from ..sim.corners import simulate_corners
 from ..validate import below_nyquist
-from .batch import BatchResult, simulate_batch
+from .tuning import DigitalTuning, digital_tuning
 
 __all__ = [
     "RobustDesign",
+    "RobustSearch",
     "synthesize_robust",
-    "simulate_corners",
     "certified_envelope",
     "ENVELOPE_MARGIN",
 ]
@@ -179,28 +179,6 @@ def _shortlist(tuning: DigitalTuning, n: int) -> list[dict[str, Any]]:
     return out[:n]
 
 
-def simulate_corners(loop: ClosedLoop, box: UncertaintyBox, reference: Reference) -> BatchResult:
-    """``loop`` simulated at every corner of ``box`` (its start: usually on the reference).
-
-    Three reference periods (0.5 s at least), statistics over the last two; or, for a
-    reference that settles (a step), until 1 s after it has settled with the statistics
-    from its first move on, so that every move of the reference is simulated and
-    measured, as the certificate covers every one. ``input_rate_max`` (over the same
-    window) is what :func:`certified_envelope` compares with the envelope a robust
-    certificate assumes.
-    """
-    if reference.period is not None:
-        duration, window = max(3 * reference.period, 0.5), None
-    else:
-        settles = max(reference.settles_at or 0.0, 0.0)
-        duration = max(settles + 1.0, 1.0)
-        moves = [float(b) for b in reference.breakpoints(0.0, settles)]
-        window = (min(moves, default=0.0), duration) if settles > 0 else None
-    return simulate_batch(
-        loop, reference, box.vertices(loop.model), duration=duration, window=window
-    )
-
-
 def certified_envelope(udot_max: float, simulated_rate: float) -> float:
     """The envelope to certify: the stage's, or ``ENVELOPE_MARGIN`` x a faster simulated rate."""
     if float(simulated_rate) <= float(udot_max):
@@ -208,27 +186,182 @@ def certified_envelope(udot_max: float, simulated_rate: float) -> float:
     return ENVELOPE_MARGIN * float(simulated_rate)
 
 
-def _loop(params, dt, c, delay, observer) -> ClosedLoop:
+@dataclass(frozen=True)
+class RobustSearch:
+    """How :func:`synthesize_robust` searches: which candidates, and the certificates' sampling.
+
+    Attributes
+    ----------
+    max_candidates : int
+        Observer bandwidths certified (the tuning's choice included), >= 1.
+    extra_gains : tuple of gain triples
+        More observer gains to certify with the tuning's law.
+    interior_samples, seed : int
+        Passed to :func:`bwdesign.certify_robust` (seeded interior points of the box).
+    """
+
+    max_candidates: int = 4
+    extra_gains: tuple[Any, ...] = ()
+    interior_samples: int = 8
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        n = self.max_candidates
+        if isinstance(n, bool) or not isinstance(n, int):
+            raise InputError(f"max_candidates must be an integer >= 1, got {n!r}")
+        if n < 1:
+            raise InputError(f"max_candidates must be >= 1, got {n}")
+
+
+@dataclass(frozen=True)
+class _Request:
+    """What every candidate is simulated and certified against (checked)."""
+
+    params: BoucWenParams
+    dt: float
+    box: UncertaintyBox
+    udot_max: float
+    reference: Reference
+    noise_max: float
+    delay: bool
+    observer: str
+    search: RobustSearch
+
+
+def _loop(rq: _Request, c: dict[str, Any]) -> ClosedLoop:
     """A candidate's loop: its gains and eq. (12) constants, unsaturated, on the reference."""
     ctrl = make_controller(
-        params, c["lambda"], c["lambda"], form="discrete", dt=dt,
+        rq.params, c["lambda"], c["lambda"], form="discrete", dt=rq.dt,
         integral_rate=c["integral_rate"],
     )  # fmt: skip
     return ClosedLoop(
-        params, ObserverSpec.of(observer, c["gains"]), ctrl, dt=dt, delay=delay,
+        rq.params, ObserverSpec.of(rq.observer, c["gains"]), ctrl, dt=rq.dt, delay=rq.delay,
         start=ON_REFERENCE,
     )  # fmt: skip
 
 
-def _corners(params, box, reference, dt, c, delay, observer) -> dict[str, Any]:
+def _corners(rq: _Request, c: dict[str, Any]) -> dict[str, Any]:
     """Worst tracking error and input rate simulated at the box's corners."""
-    res = simulate_corners(_loop(params, dt, c, delay, observer), box, reference)
+    loop = _loop(rq, c)
+    res = simulate_corners(loop, rq.box, rq.reference)
     if not res.stable.all():
         return {"simulated_maxe": None, "simulated_udot_max": None}
     return {
         "simulated_maxe": float(np.max(res.maxe)),
         "simulated_udot_max": float(np.max(res.input_rate_max)),
     }
+
+
+def _candidates(rq: _Request, tuning: DigitalTuning) -> list[dict[str, Any]]:
+    """The shortlist of the tuning, then the given gains with the tuning's law."""
+    cands = _shortlist(tuning, rq.search.max_candidates)
+    for g in rq.search.extra_gains:
+        cands.append(
+            {
+                "observer_bandwidth": math.nan,
+                "gains": tuple(float(v) for v in check_gains(rq.params, g)),
+                "lambda": tuning.lambda1,
+                "integral_rate": tuning.integral_rate,
+                "score": math.nan,
+                "origin": "given gains with the tuning's law",
+            }
+        )
+    return cands
+
+
+def _assess(rq: _Request, c: dict[str, Any]) -> RobustCertificate | None:
+    """Simulate candidate ``c`` at the corners, then certify it (``c`` gets the verdict)."""
+    c["gains"] = gains_for_observer(rq.observer, c["gains"])
+    c.update(_corners(rq, c))
+    c.update(holds=False, tracking_bound=None, estimation_bound=None, envelope=None)
+    c["x3_estimation_bound"] = None
+    if c["simulated_udot_max"] is None:
+        c["status"] = "rejected: the loop diverges at a corner of the box (simulated)"
+        return None
+    # the envelope the certificate assumes: the stage's, or what the simulated
+    # corners need with a margin when their input moves faster
+    env = certified_envelope(rq.udot_max, c["simulated_udot_max"])
+    rc = certify_robust(
+        _loop(rq, c),
+        uncertainty=rq.box,
+        udot_max=env,
+        reference=rq.reference,
+        noise_max=rq.noise_max,
+        interior_samples=rq.search.interior_samples,
+        seed=rq.search.seed,
+    )
+    iu = rq.params.input_unit
+    c.update(
+        holds=rc.holds,
+        tracking_bound=rc.tracking_bound,
+        estimation_bound=rc.estimation_bound,
+        x3_estimation_bound=rc.x3_estimation_bound,
+        envelope=env,
+        status=rc.status
+        + (
+            ""
+            if env == rq.udot_max
+            else f" (envelope raised from {rq.udot_max:.4g} {iu}/s: the simulated corners' "
+            f"input reaches {c['simulated_udot_max']:.4g} {iu}/s)"
+        ),
+    )
+    return rc
+
+
+def _design(
+    rq: _Request,
+    tuning: DigitalTuning,
+    results: list[tuple[dict[str, Any], RobustCertificate | None]],
+) -> RobustDesign:
+    """The certified candidate of smallest tracking bound, or a "no" with every verdict."""
+    held = [(c, rc) for c, rc in results if rc is not None and rc.holds]
+    lu = rq.params.length_unit
+    candidates = tuple(c for c, _ in results)
+    if held:
+        c, rc = min(held, key=lambda t: t[1].tracking_bound)
+        reason = (
+            f"{len(held)} of {len(results)} candidates certified over the box; chosen: observer "
+            "gains "
+            f"{', '.join(f'{g:.6g}' for g in c['gains'])} ({c['origin']}), lambda = "
+            f"{c['lambda']:.4g} 1/s, integral rate {c['integral_rate']} 1/s: the smallest "
+            f"certified steady tracking bound, {rc.tracking_bound:.4g} {lu} (worst simulated "
+            f"at the corners {c['simulated_maxe']:.4g} {lu})"
+        )
+        return RobustDesign(
+            feasible=True,
+            gains=tuple(c["gains"]),
+            lambda1=c["lambda"],
+            lambda2=c["lambda"],
+            integral_rate=c["integral_rate"],
+            delay=rq.delay,
+            certificate=rc,
+            tuning=tuning,
+            candidates=candidates,
+            reason=reason,
+            observer=rq.observer,
+        )
+    reason = (
+        f"no robust design: none of the {len(results)} candidates is certified over the box ("
+        + "; ".join(
+            f"omega_o = {c['observer_bandwidth']:.4g} rad/s, lambda = {c['lambda']:.4g} 1/s: "
+            f"{c['status']}"
+            for c, rc in results
+        )
+        + ")"
+    )
+    return RobustDesign(
+        feasible=False,
+        gains=None,
+        lambda1=None,
+        lambda2=None,
+        integral_rate=None,
+        delay=rq.delay,
+        certificate=next((rc for _, rc in results if rc is not None), None),
+        tuning=tuning,
+        candidates=candidates,
+        reason=reason,
+        observer=rq.observer,
+    )
 
 
 def synthesize_robust(
@@ -241,11 +374,8 @@ def synthesize_robust(
     noise_max: float = 0.0,
     integral_ratio: float | None = 0.5,
     delay: bool = True,
-    max_candidates: int = 4,
-    extra_gains: tuple[Any, ...] = (),
-    interior_samples: int = 8,
-    seed: int = 0,
     observer: str = "phdo",
+    search: RobustSearch = RobustSearch(),
 ) -> RobustDesign:
     """Observer gains and eq. (12) constants certified over every plant in a box.
 
@@ -267,12 +397,6 @@ def synthesize_robust(
         Integral action at ``integral_ratio * lambda`` (None: none).
     delay : bool
         One-sample computation delay with compensation.
-    max_candidates : int
-        Observer bandwidths certified (the tuning's choice included), >= 1.
-    extra_gains : tuple of gain triples
-        More observer gains to certify with the tuning's law.
-    interior_samples, seed : int
-        Passed to :func:`certify_robust`.
     observer : {"phdo", "phso"}
         The loop's observer; the PHDO (default) gets ``(l1, l2, 0, l3)`` of each
         candidate (:func:`~bwdesign.observers.gains.disturbance_gains_from`) and its
@@ -281,6 +405,9 @@ def synthesize_robust(
         a1 is high and a3 low (measured on ``paper_experiment`` +-2 %: its input
         rate reaches 5000-8500 V/s against a 397 V/s envelope for every law
         tried), so its certificate's envelope assumption fails there.
+    search : RobustSearch
+        How many candidates, extra gains to try, and the certificates' interior
+        samples and seed (default: 4 candidates, none extra, 8 samples, seed 0).
 
     Returns
     -------
@@ -293,108 +420,14 @@ def synthesize_robust(
     uncertainty.check(params)  # before any work: what certify_robust needs of the box
     if observer not in ("phso", "phdo"):
         raise InputError(f"observer must be 'phso' or 'phdo', got {observer!r}")
-    if isinstance(max_candidates, bool) or not isinstance(max_candidates, int):
-        raise InputError(f"max_candidates must be an integer >= 1, got {max_candidates!r}")
-    if max_candidates < 1:
-        raise InputError(f"max_candidates must be >= 1, got {max_candidates}")
+    if not isinstance(search, RobustSearch):
+        raise InputError(f"search must be a RobustSearch, got {search!r}")
     below_nyquist(reference, check_sample_time(params, dt))
     tuning = digital_tuning(
         params, dt, uncertainty=uncertainty, integral_ratio=integral_ratio, delay=delay
     )
-    cands = _shortlist(tuning, max_candidates)
-    for g in extra_gains:
-        cands.append(
-            {
-                "observer_bandwidth": math.nan,
-                "gains": tuple(float(v) for v in check_gains(params, g)),
-                "lambda": tuning.lambda1,
-                "integral_rate": tuning.integral_rate,
-                "score": math.nan,
-                "origin": "given gains with the tuning's law",
-            }
-        )
-    results: list[tuple[dict[str, Any], RobustCertificate | None]] = []
-    iu = params.input_unit
-    for c in cands:
-        c["gains"] = gains_for_observer(observer, c["gains"])
-        c.update(_corners(params, uncertainty, reference, tuning.dt, c, delay, observer))
-        c.update(holds=False, tracking_bound=None, estimation_bound=None, envelope=None)
-        c["x3_estimation_bound"] = None
-        if c["simulated_udot_max"] is None:
-            c["status"] = "rejected: the loop diverges at a corner of the box (simulated)"
-            results.append((c, None))
-            continue
-        # the envelope the certificate assumes: the stage's, or what the simulated
-        # corners need with a margin when their input moves faster
-        env = certified_envelope(udot_max, c["simulated_udot_max"])
-        rc = certify_robust(
-            _loop(params, tuning.dt, c, delay, observer),
-            uncertainty=uncertainty,
-            udot_max=env,
-            reference=reference,
-            noise_max=noise_max,
-            interior_samples=interior_samples,
-            seed=seed,
-        )
-        c.update(
-            holds=rc.holds,
-            tracking_bound=rc.tracking_bound,
-            estimation_bound=rc.estimation_bound,
-            x3_estimation_bound=rc.x3_estimation_bound,
-            envelope=env,
-            status=rc.status
-            + (
-                ""
-                if env == udot_max
-                else f" (envelope raised from {udot_max:.4g} {iu}/s: the simulated corners' "
-                f"input reaches {c['simulated_udot_max']:.4g} {iu}/s)"
-            ),
-        )
-        results.append((c, rc))
-    held = [(c, rc) for c, rc in results if rc is not None and rc.holds]
-    lu = params.length_unit
-    if held:
-        c, rc = min(held, key=lambda t: t[1].tracking_bound)
-        reason = (
-            f"{len(held)} of {len(results)} candidates certified over the box; chosen: observer "
-            "gains "
-            f"{', '.join(f'{g:.6g}' for g in c['gains'])} ({c['origin']}), lambda = "
-            f"{c['lambda']:.4g} 1/s, integral rate {c['integral_rate']} 1/s: the smallest "
-            f"certified steady tracking bound, {rc.tracking_bound:.4g} {lu} (worst simulated "
-            f"at the corners {c['simulated_maxe']:.4g} {lu})"
-        )
-        return RobustDesign(
-            feasible=True,
-            gains=tuple(c["gains"]),
-            lambda1=c["lambda"],
-            lambda2=c["lambda"],
-            integral_rate=c["integral_rate"],
-            delay=delay,
-            certificate=rc,
-            tuning=tuning,
-            candidates=tuple(c for c, _ in results),
-            reason=reason,
-            observer=observer,
-        )
-    reason = (
-        f"no robust design: none of the {len(results)} candidates is certified over the box ("
-        + "; ".join(
-            f"omega_o = {c['observer_bandwidth']:.4g} rad/s, lambda = {c['lambda']:.4g} 1/s: "
-            f"{c['status']}"
-            for c, rc in results
-        )
-        + ")"
+    rq = _Request(
+        params, tuning.dt, uncertainty, udot_max, reference, noise_max, delay, observer, search
     )
-    return RobustDesign(
-        feasible=False,
-        gains=None,
-        lambda1=None,
-        lambda2=None,
-        integral_rate=None,
-        delay=delay,
-        certificate=next((rc for _, rc in results if rc is not None), None),
-        tuning=tuning,
-        candidates=tuple(c for c, _ in results),
-        reason=reason,
-        observer=observer,
-    )
+    results = [(c, _assess(rq, c)) for c in _candidates(rq, tuning)]
+    return _design(rq, tuning, results)

@@ -9,12 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GainError, InputError
-from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import check_sample_time, discretize
-from ..observers.gains import check_gains, delta_transition, discrete_gains, error_matrix
-from ..validate import DECAY, POLE_RADIUS, UDOT_MAX, real
-from .checks import (
+from ..certify.checks import (
     continuous_equivalent,
     lipschitz_coefficient,
     model_matrix,
@@ -25,9 +20,14 @@ from .checks import (
     sector_interval,
     similar,
 )
-from .frequency import continuous_family, sampled_family
-from .results import K_HAT_CAP, OUTPUT_ROW, CertificateReport, Margin, SynthesisResult
-from .tiers import certify, certify_discrete, largest_decay, largest_rate
+from ..certify.frequency import continuous_family, sampled_family
+from ..certify.results import K_HAT_CAP, OUTPUT_ROW, CertificateReport, Margin, SynthesisResult
+from ..certify.tiers import certify, certify_discrete, largest_decay, largest_rate
+from ..errors import GainError, InputError
+from ..model.params import BoucWenParams, require_bounded
+from ..model.plant import check_sample_time, discretize
+from ..observers.gains import check_gains, delta_transition, discrete_gains, error_matrix
+from ..validate import DECAY, POLE_RADIUS, UDOT_MAX, real
 
 __all__ = ["synthesize", "default_pole_radius"]
 
@@ -98,7 +98,7 @@ def synthesize(
     tier : {"theorem1", "lipschitz", "sector", "sampled"}, optional
         The tier to synthesise for; default ``sector`` without ``dt``, ``sampled``
         with it (the behaviour above). ``theorem1`` and ``lipschitz`` are the
-        continuous LMIs of :mod:`bwdesign.certify.tier_synthesis` (``max_udot`` is
+        continuous LMIs of :mod:`bwdesign.design.tiers` (``max_udot`` is
         the envelope the synthesised gains reach): a given ``pole_radius`` is an LMI
         constraint and is measured on the gains (no default region for them), and
         ``dt`` adds the discrete gains and the ``sampled`` re-certification, which
@@ -134,7 +134,7 @@ def synthesize(
     if tier is not None and tier not in ("theorem1", "lipschitz", "sector", "sampled"):
         raise InputError(f"unknown tier {tier!r}; tiers are theorem1, lipschitz, sector, sampled")
     if tier in ("theorem1", "lipschitz"):
-        from .tier_synthesis import synthesize_tier
+        from .tiers import synthesize_tier
 
         return synthesize_tier(
             params,
@@ -151,7 +151,7 @@ def synthesize(
         res = _synthesize_continuous(params, udot_max, decay, R, allow_unbounded)
         if dt is None:
             return res
-        from .tier_synthesis import recertify_sampled
+        from .tiers import recertify_sampled
 
         return recertify_sampled(res, dt, allow_unbounded)
     return _synthesize_sampled(params, udot_max, decay, R, dt, allow_unbounded)
@@ -466,7 +466,7 @@ def _best_envelope(
 def _synthesize_continuous(
     params: BoucWenParams, udot_max: float, decay: float, R: float, allow_unbounded: bool
 ) -> SynthesisResult:
-    from . import lmi
+    from ..certify import lmi
 
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])
@@ -506,7 +506,7 @@ def _synthesize_continuous(
 def _synthesize_sampled(
     params: BoucWenParams, udot_max: float, decay: float, R: float, dt: float, allow_unbounded: bool
 ) -> SynthesisResult:
-    from . import lmi
+    from ..certify import lmi
 
     w = math.sqrt(params.a1)
     T = np.array([1.0, w, 1.0])

@@ -36,11 +36,11 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..certify.checks import lipschitz_coefficient
+from ..certify.results import Margin, SynthesisResult
+from ..certify.tiers import certify
 from ..model.params import BoucWenParams
 from ..observers.gains import error_matrix
-from .checks import lipschitz_coefficient
-from .results import Margin, SynthesisResult
-from .tiers import certify
 
 __all__ = ["synthesize_tier", "recertify_sampled"]
 
@@ -99,7 +99,7 @@ def _pole_check(params: BoucWenParams, gains, R: float) -> Margin | None:
 
 def _theorem1(params, w0, s, Ahat, c, udot_max, mu, radius):
     """``(gains, envelope, margin, solver, status)`` of the Theorem-1 synthesis."""
-    from . import lmi
+    from ..certify import lmi
 
     sol = lmi.theorem1_synthesis(Ahat, mu=mu, lmax=LMAX, radius=radius)
     if not sol.ok:
@@ -119,7 +119,7 @@ def _theorem1(params, w0, s, Ahat, c, udot_max, mu, radius):
 
 def _lipschitz(w0, s, Ahat, c, udot_max, mu, radius):
     """``(gains, solver, status)`` of the lipschitz synthesis (bisection on ``L``)."""
-    from . import lmi
+    from ..certify import lmi
 
     def feasible(L: float):
         sol = lmi.lipschitz_synthesis(Ahat, L=L / w0, mu=mu, lmax=LMAX, radius=radius)

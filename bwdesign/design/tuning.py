@@ -9,19 +9,25 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
+from ..control.analysis import LoopAnalysis, analyze_loop
+from ..control.controllers import TuningWarning, make_controller
+from ..control.loop import ClosedLoop
+from ..control.systems import LoopSystems, loop_systems, stability
+from ..errors import ConfigError, InputError
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
 from ..observers.gains import check_gains, gains_for_observer
 from ..observers.spec import ObserverSpec
 from ..validate import NONNEGATIVE, POSITIVE, Range, integer, real
-from .analysis import LoopAnalysis, analyze_loop
-from .controllers import TuningWarning, make_controller
-from .loop import ClosedLoop
-from .systems import LoopSystems, loop_systems, stability
 
-__all__ = ["observer_gains", "digital_tuning", "DigitalTuning", "MarginRequirements"]
+__all__ = [
+    "observer_gains",
+    "digital_tuning",
+    "stage_tuning",
+    "DigitalTuning",
+    "MarginRequirements",
+]
 
 
 def observer_gains(params: BoucWenParams, poles: Any) -> np.ndarray:
@@ -132,7 +138,12 @@ class DigitalTuning:
         return gains_for_observer(observer, self.gains)
 
     def controller_kwargs(self, *, observer: str = "phso") -> dict[str, Any]:
-        """Keywords for :func:`bwdesign.sim.simulate` (gains, lambdas, form, integral)."""
+        """The tuning as flat keywords: ``gains`` (for ``observer``), ``lambda1``, ``lambda2``,
+        ``form``, ``integral_rate`` (the law's are :func:`~bwdesign.make_controller`'s).
+
+        A loop is built from a tuning by
+        :meth:`ClosedLoop.from_config(config, law=tuning) <bwdesign.ClosedLoop.from_config>`.
+        """
         return {
             "gains": self.observer_gains_for(observer),
             "lambda1": self.lambda1,
@@ -404,6 +415,28 @@ def digital_tuning(
     )
 
 
+def stage_tuning(config: Any, tuning: str) -> DigitalTuning | None:
+    """The law a stage's loop runs: ``None`` for ``tuning="config"`` (its ``[observer]``
+    gains and ``[controller]`` constants), :func:`digital_tuning` at its ``[sampling] dt``
+    for ``"digital"``. What a caller of :func:`bwdesign.sim.sweep.spec_from_config` (the
+    sweep, which simulates the gains it is given) calls first.
+
+    Raises
+    ------
+    InputError
+        ``tuning`` is neither.
+    ConfigError
+        ``"digital"`` for a stage without ``[sampling] dt``.
+    """
+    if tuning not in ("config", "digital"):
+        raise InputError(f"tuning must be 'config' or 'digital', got {tuning!r}")
+    if tuning == "config":
+        return None
+    if config.dt is None:
+        raise ConfigError(f"{config.source or 'config'}: the digital tuning needs [sampling] dt")
+    return digital_tuning(config.plant, config.dt)
+
+
 def _checked_mismatch(mismatch: float | None, uncertainty: UncertaintyBox | None) -> float:
     """The relative a1, a3 error to tune against (0 with a box, whose corners are used)."""
     if uncertainty is not None and mismatch is not None:
@@ -433,7 +466,8 @@ class _Law:
             warnings.simplefilter("ignore", TuningWarning)
             law = make_controller(params, lam, lam, form="discrete", dt=self.dt, integral_rate=ir)
         spec = ObserverSpec.of("phso", gains)
-        return ClosedLoop(params, spec, law, dt=self.dt, delay=self.delay)
+        # the linear analysis holds x3: the hysteresis class does not enter the margins
+        return ClosedLoop(params, spec, law, dt=self.dt, delay=self.delay, allow_unbounded=True)
 
 
 def _score(req: dict[str, float], gm: float, pm: float, dm: float) -> float:
