@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..model.params import BoucWenParams
 from ..model.uncertainty import UncertaintyBox
@@ -362,32 +361,21 @@ def _pct(rel: float) -> str:
 
 def _validate(prob: Problem, theta: np.ndarray) -> tuple[np.ndarray, float]:
     """Re-estimate offset and initial state on a validation record, parameters held."""
+    from .solve import solve
+
     free = np.zeros(10, dtype=bool)
     free[[IOFF, IZ, IE1, IE2]] = True
     cost, th = prob.project(theta)
     th[[IK, IA]] = theta[[IK, IA]]
-    lo = np.array([-np.inf, -5.0, -np.inf, -np.inf])
-    hi = np.array([np.inf, 5.0, np.inf, np.inf])
+    lo, hi = np.full(10, -np.inf), np.full(10, np.inf)
+    lo[IZ], hi[IZ] = -5.0, 5.0
     best = None
     for z in (-0.8, 0.0, 0.8):
         th0 = th.copy()
         th0[IZ] = z
-
-        def full(x: np.ndarray, th0: np.ndarray = th0) -> np.ndarray:
-            t = th0.copy()
-            t[free] = x
-            return t
-
-        sol = least_squares(
-            lambda x, full=full: prob.residual(full(x)),
-            th0[free],
-            jac=lambda x, full=full: prob.jacobian(full(x), free),
-            bounds=(lo, hi),
-            method="trf",
-            max_nfev=50,
-        )
+        th_z, sol = solve(prob, th0, free, (lo, hi), max_nfev=50)
         if best is None or sol.cost < best[1]:
-            best = (full(sol.x), sol.cost)
+            best = (th_z, sol.cost)
     pred = prob.predict(best[0])
     return pred, fit_percent(prob.y, pred)
 
@@ -610,13 +598,14 @@ def _widened_note(alt: list[BoucWenParams], widened: list[str]) -> str:
 
 
 def _convergence(sol: Any, values: dict[str, float]) -> tuple[bool, str]:
-    """``(converged, reason)``: the optimiser met its tolerances and the optimum is finite."""
+    """``(converged, reason)``: the fit met the step test and the optimum is finite."""
     finite = all(math.isfinite(v) for v in values.values()) and math.isfinite(sol.cost)
     converged = bool(sol.status > 0 and finite)
     reason = str(sol.message) if finite else "the optimum is not finite"
-    if sol.status == 0:
-        reason = (
-            f"the optimiser used its {sol.nfev} residual evaluations without meeting its "
-            "tolerances; give a better --init or a richer record"
+    if not converged:
+        reason += (
+            "; what would help: a start closer to the stage (--init), a record with larger "
+            "reversals and content near the resonance (bwdesign excite), or more "
+            "evaluations (--max-nfev)"
         )
     return converged, reason
