@@ -128,13 +128,15 @@ def _grid_hysteresis(prob: Problem, base: np.ndarray, free: np.ndarray) -> tuple
     u_range = float(np.ptp(prob.u))
     betas = np.geomspace(0.3, 100.0, 9) / u_range if free[IB] else [math.exp(base[IB])]
     qs = (-1.0, 0.0, 1.0) if free[IQ] else (base[IQ],)
-    best = (math.inf, base)
+    best = None  # ties (all infinite: no positive gain and alpha) keep the first point
     for beta in betas:
         for q in qs:
             for z in (-0.8, 0.0, 0.8):
                 th = base.copy()
                 th[IB], th[IQ], th[IZ] = math.log(beta), q, z
-                best = min(best, prob.project(th), key=lambda c: c[0])
+                scored = prob.project(th)
+                if best is None or scored[0] < best[0]:
+                    best = scored
     return best
 
 
@@ -258,9 +260,7 @@ def _multistart(
         th0[IQ] = float(np.clip(th0[IQ], -Q_MAX + 0.1, Q_MAX - 0.1))
         th, sol_i = _refine(prob, th0, free, max_nfev)
         total += sol_i.nfev
-        say(
-            f"  start {i + 1}/{multistart}: cost {2 * sol_i.cost:.6g} after {sol_i.nfev} evaluations"
-        )
+        say(f"  start {i + 1}/{multistart}: cost {2 * sol_i.cost:.6g} after {sol_i.nfev} evals")
         if sol_i.cost < sol.cost * (1 - 1e-9) and (sol_i.status > 0 or sol.status == 0):
             theta, sol = th, sol_i
     return theta, sol, total

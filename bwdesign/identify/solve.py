@@ -101,7 +101,7 @@ def solve(
             return theta, Solution(cost, nfev, njev, 1, _msg(crit), crit)
         s, vt = s[ok], vt[ok]
         if lam is None:
-            lam = 1e-4 * s[0] ** 2
+            lam = 1e-3 * s[0] ** 2
         while True:
             if nfev >= max_nfev:
                 return theta, Solution(
