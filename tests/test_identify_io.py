@@ -259,7 +259,9 @@ def test_identify_not_converged_exit_1(records, capsys, tmp_path):
         ]
     )
     assert rc == 1
-    assert "did not converge" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "did not converge" in err and "what would help" in err
+    assert "best fit found (not written): train" in err
     assert not out.exists()
 
 

@@ -1,7 +1,8 @@
 """``bwdesign identify``: a measured record in, a stage TOML (and a report) out.
 
-Exit codes: 0 fitted; 1 the fit did not converge (the reason on stderr, nothing
-written); 2 bad input with one ``error:`` line (nothing written).
+Exit codes: 0 fitted; 1 the fit did not converge (the reason, what would help and
+the best fit found on stderr, nothing written); 2 bad input with one ``error:`` line
+(nothing written).
 """
 
 from __future__ import annotations
@@ -86,7 +87,16 @@ def run_identify(args: argparse.Namespace) -> int:
     if not result.converged:
         if args.json:
             print(dump_json(doc))
-        print(f"identify: the fit did not converge: {result.reason}", file=sys.stderr)
+        fp = result.fit_percent
+        val = f", validation {fp['validation']:.2f} %" if fp["validation"] is not None else ""
+        p = result.params
+        print(
+            f"identify: the fit did not converge: {result.reason}\n"
+            f"identify: best fit found (not written): train {fp['train']:.2f} %{val}, "
+            f"a1={p.a1:.6g} a2={p.a2:.6g} a3={p.a3:.6g} alpha={p.alpha:.6g} "
+            f"beta={p.beta:.6g} gamma={p.gamma:.6g}, offset {result.offset:.6g} um",
+            file=sys.stderr,
+        )
         return EXIT_NO
     target.write_text(stage_toml(result, data))
     doc["out"] = str(out)
