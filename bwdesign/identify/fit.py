@@ -1,4 +1,11 @@
-"""Output-error identification of the Bouc-Wen stage from one measured record.
+"""Output-error identification of the Bouc-Wen stage from one or several measured records.
+
+Several records (any amplitudes, frequencies and sample rates) are fitted as one
+:class:`~bwdesign.identify.stack.Stack`: one parameter set, an offset and an
+initial state per record. Every step below then runs over all of them: the
+quasi-static decision and the start grids use the union (a record with power
+near the resonance frees it for all), the sample time in the defaults is the
+smallest one, the input delay (in samples) is common to the records.
 
 Steps (each is seeded and deterministic):
 
@@ -39,7 +46,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,21 +59,17 @@ from .data import IdentificationData
 from .problem import (
     IA,
     IB,
-    IE1,
-    IE2,
     IK,
-    IOFF,
     IQ,
     ITAU,
     IW,
     IZ,
     Q_MAX,
-    Problem,
-    delayed_input,
     theta_from_params,
 )
 from .result import FitOutcome, IdentificationResult, build_result
 from .solve import Solution, solve
+from .stack import Stack
 
 __all__ = ["identify", "NAMES"]
 
@@ -123,30 +126,40 @@ def _free_mask(fixed: Iterable[str], init: BoucWenParams | None) -> np.ndarray:
     return free
 
 
-def _grid_hysteresis(prob: Problem, base: np.ndarray, free: np.ndarray) -> tuple[float, np.ndarray]:
-    """Best hysteresis shape (beta range x gamma/beta x h0) by linear projection."""
-    u_range = float(np.ptp(prob.u))
-    betas = np.geomspace(0.3, 100.0, 9) / u_range if free[IB] else [math.exp(base[IB])]
+def _grid_hysteresis(prob: Stack, base: np.ndarray, free: np.ndarray) -> tuple[float, np.ndarray]:
+    """Best hysteresis shape (beta range x gamma/beta x h0) by linear projection.
+
+    Several records: one h0 for all on the grid, then each record's h0 in turn.
+    """
+    betas = np.geomspace(0.3, 100.0, 9) / prob.u_range if free[IB] else [math.exp(base[IB])]
     qs = (-1.0, 0.0, 1.0) if free[IQ] else (base[IQ],)
     best = None  # ties (all infinite: no positive gain and alpha) keep the first point
     for beta in betas:
         for q in qs:
             for z in (-0.8, 0.0, 0.8):
                 th = base.copy()
-                th[IB], th[IQ], th[IZ] = math.log(beta), q, z
+                th[IB], th[IQ], th[prob.i_z] = math.log(beta), q, z
                 scored = prob.project(th)
                 if best is None or scored[0] < best[0]:
                     best = scored
+    for k in range(prob.n_records if prob.n_records > 1 else 0):
+        th = best[1]
+        for z in (-0.8, 0.0, 0.8):
+            trial = th.copy()
+            trial[prob.i_z[k]] = z
+            scored = prob.project(trial)
+            if scored[0] < best[0]:
+                best = scored
     return best
 
 
 def _grid_linear(
-    prob: Problem, base: np.ndarray, free: np.ndarray, *, quasi_static: bool = False
+    prob: Stack, base: np.ndarray, free: np.ndarray, *, quasi_static: bool = False
 ) -> tuple[float, np.ndarray]:
     """Score a grid of resonance x damping (quasi-static: of the lag, the resonance
     held) by linear projection at a fixed hysteresis shape."""
     nyq = math.pi / prob.dt
-    duration = prob.u.size * prob.dt
+    duration = prob.duration
     if quasi_static or not free[IW]:
         wns = [math.exp(base[IW])]
     else:
@@ -170,70 +183,73 @@ def _grid_linear(
 
 
 def _start(
-    data: IdentificationData, init: BoucWenParams | None, free: np.ndarray
+    records: list[IdentificationData], init: BoucWenParams | None, free: np.ndarray
 ) -> tuple[np.ndarray, float, float, bool]:
     """Start vector, gain sign, its cost, and whether the start is quasi-static.
 
-    Quasi-static: the input has less than :data:`MIN_BAND_FRACTION` of its power
+    Quasi-static: no record's input has :data:`MIN_BAND_FRACTION` of its power
     above a third of the starting resonance (init's, else a quarter of the
-    Nyquist frequency), so the record cannot place it; the resonance is then
-    held (at init's, else at the Nyquist frequency) and not gridded.
+    highest Nyquist frequency), so the records cannot place it; the resonance is
+    then held (at init's, else at that Nyquist frequency) and not gridded.
     """
-    coef = np.polyfit(data.u, data.y, 1)
+    u = np.concatenate([r.u - np.mean(r.u) for r in records])
+    y = np.concatenate([r.y - np.mean(r.y) for r in records])
+    coef = np.polyfit(u, y, 1)
     sign = math.copysign(1.0, coef[0]) if init is None else math.copysign(1.0, init.a3)
+    dt = min(r.dt for r in records)
     if init is not None:
         base, sign = theta_from_params(init)
     else:
-        wn = 0.5 * math.pi / data.dt
+        wn = 0.5 * math.pi / dt
         base = np.zeros(10)
         base[IW] = math.log(wn)
         base[ITAU] = math.log(2.0 * 0.7 / wn)
-        base[IB] = math.log(1.0 / float(np.ptp(data.u)))
+        u_range = max(r.u.max() for r in records) - min(r.u.min() for r in records)
+        base[IB] = math.log(1.0 / float(u_range))
     f_r = math.exp(base[IW]) / (2 * math.pi)
-    quasi_static = bool(
-        free[IW] and _band_fraction(data.u, data.dt, f_r / 3.0, math.inf) < MIN_BAND_FRACTION
-    )
-    # the start is scored on the first START_SAMPLES samples (a slow sine's first
-    # periods place the loop as well as all of them)
-    m = min(data.n, START_SAMPLES)
-    prob = Problem(data.u[:m], data.y[:m], data.dt, sign)
+    quasi_static = bool(free[IW] and _band(records, f_r / 3.0, math.inf) < MIN_BAND_FRACTION)
+    # the start is scored on the first START_SAMPLES samples of each record (a slow
+    # sine's first periods place the loop as well as all of them)
+    prob = Stack.build(records, sign, window=START_SAMPLES)
     if init is not None:
-        # keep init's values; only the offset and initial state from the data
-        th = base.copy()
-        scores = []
-        for z in (-0.8, 0.0, 0.8):
-            trial = th.copy()
-            trial[IZ] = z
-            scores.append((prob.project(trial)[0], z))
-        th[IZ] = min(scores)[1]
+        # keep init's values; only the offsets and initial states from the data
+        th = prob.expand(base)
+        for k in range(prob.n_records):
+            scores = []
+            for z in (-0.8, 0.0, 0.8):
+                trial = th.copy()
+                trial[prob.i_z[k]] = z
+                scores.append((prob.project(trial)[0], z))
+            th[prob.i_z[k]] = min(scores)[1]
         cost, proj = prob.project(th)
-        th[IOFF], th[IE1], th[IE2] = proj[IOFF], proj[IE1], proj[IE2]
+        for i in (prob.i_off, prob.i_e1, prob.i_e2):
+            th[i] = proj[i]
         return th, sign, cost, quasi_static
     if quasi_static:
-        base[IW] = math.log(math.pi / data.dt)
-        base[ITAU] = math.log(2.0 * 0.7 * data.dt / math.pi)
-    th = _grid_hysteresis(prob, base, free)[1]
+        base[IW] = math.log(math.pi / dt)
+        base[ITAU] = math.log(2.0 * 0.7 * dt / math.pi)
+    th = _grid_hysteresis(prob, prob.expand(base), free)[1]
     th = _grid_linear(prob, th, free, quasi_static=quasi_static)[1]
     cost, th = _grid_hysteresis(prob, th, free)
     return th, sign, cost, quasi_static
 
 
 def _bounds(start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    lo = np.full(10, -np.inf)
-    hi = np.full(10, np.inf)
+    lo = np.full(start.size, -np.inf)
+    hi = np.full(start.size, np.inf)
     for i in (IK, ITAU, IW, IA, IB):
         lo[i], hi[i] = start[i] - 12.0, start[i] + 12.0
     lo[IQ], hi[IQ] = -Q_MAX, Q_MAX
-    lo[IZ], hi[IZ] = -5.0, 5.0
+    lo[IZ::4], hi[IZ::4] = -5.0, 5.0  # each record's h0
     return lo, hi
 
 
-def _refine(prob: Problem, start: np.ndarray, free: np.ndarray, max_nfev: int):
+def _refine(prob: Stack, start: np.ndarray, free: np.ndarray, max_nfev: int):
     return solve(prob, start, free, _bounds(start), max_nfev=max_nfev)
 
 
 def _multistart(
-    prob: Problem,
+    prob: Stack,
     start: np.ndarray,
     free: np.ndarray,
     *,
@@ -251,12 +267,12 @@ def _multistart(
     theta, sol = _refine(prob, start, free, max_nfev)
     total = sol.nfev
     say(f"  start 1/{multistart}: cost {2 * sol.cost:.6g} after {sol.nfev} evaluations")
-    scale = np.zeros(10)
+    scale = np.zeros(theta.size)
     scale[[IK, ITAU, IW, IA, IB]] = 0.3
     scale[IQ] = 0.5
-    scale[IZ] = 0.3
+    scale[IZ::4] = 0.3  # each record's h0
     for i in range(1, max(1, multistart)):
-        th0 = theta + np.where(free, scale * rng.standard_normal(10), 0.0)
+        th0 = theta + np.where(free, scale * rng.standard_normal(theta.size), 0.0)
         th0[IQ] = float(np.clip(th0[IQ], -Q_MAX + 0.1, Q_MAX - 0.1))
         th, sol_i = _refine(prob, th0, free, max_nfev)
         total += sol_i.nfev
@@ -267,9 +283,9 @@ def _multistart(
 
 
 def identify(
-    data: IdentificationData,
+    data: IdentificationData | Sequence[IdentificationData],
     *,
-    validation: IdentificationData | None = None,
+    validation: IdentificationData | Sequence[IdentificationData] | None = None,
     init: str | BoucWenParams | None = None,
     fixed: Iterable[str] = (),
     multistart: int = 3,
@@ -278,16 +294,20 @@ def identify(
     name: str = "identified",
     progress: Callable[[str], None] | None = None,
 ) -> IdentificationResult:
-    """Fit (a1, a2, a3, alpha, beta, gamma) to a measured record (output error, exact ZOH model).
+    """Fit (a1, a2, a3, alpha, beta, gamma) to measured records (output error, exact ZOH model).
 
     Parameters
     ----------
-    data : IdentificationData
-        Training record (:func:`bwdesign.identify.load_data` or
-        :meth:`IdentificationData.from_arrays`); t in s, u in V, y in µm.
-    validation : IdentificationData, optional
-        Held-out record: the fit percent on it is reported (its offset and
-        initial state are re-estimated with the parameters held).
+    data : IdentificationData or sequence of IdentificationData
+        Training record(s) (:func:`bwdesign.identify.load_data` or
+        :meth:`IdentificationData.from_arrays`); t in s, u in V, y in µm. Several
+        records (any amplitudes, frequencies and sample rates) are fitted together:
+        one parameter set, a sensor offset and an initial state per record
+        (``result.records``); the first record is the reference one (its offset,
+        initial state and sample time are the result's top-level ones).
+    validation : IdentificationData or sequence of them, optional
+        Held-out record(s), any sample rate: the fit percent on them is reported
+        (each one's offset and initial state re-estimated with the parameters held).
     init : str or BoucWenParams, optional
         Preset name, stage TOML or parameters to start from (and the prior for
         a resonance the data do not determine). Without it the start is derived
@@ -314,21 +334,17 @@ def identify(
         without meeting its tolerances or the result is not finite.
     """
     say = progress or (lambda _msg: None)
-    if not isinstance(data, IdentificationData):
-        raise InputError("data must be an IdentificationData (use bwdesign.identify.load_data)")
-    if validation is not None and not isinstance(validation, IdentificationData):
-        raise InputError("validation must be an IdentificationData")
-    if validation is not None and abs(validation.dt - data.dt) > 1e-3 * data.dt:
-        raise InputError(
-            f"validation record is sampled at {validation.dt:.6g} s, the training record at "
-            f"{data.dt:.6g} s: they must share the sample time"
-        )
+    records = _records(data, "data")
+    valids = _records(validation, "validation") if validation is not None else []
     multistart = integer(multistart, "multistart", within=MULTISTART)
     tic = time.perf_counter()
     prior = _resolve_init(init)
-    free = _free_mask(fixed, prior)
-    say(f"identify: {data.n} samples at dt = {data.dt:.6g} s; deriving a start from the data")
-    start, sign, cost0, quasi_static = _start(data, prior, free)
+    say(
+        "identify: "
+        + "; ".join(f"{r.n} samples at dt = {r.dt:.6g} s" for r in records)
+        + "; deriving a start from the data"
+    )
+    start, sign, cost0, quasi_static = _start(records, prior, _free_mask(fixed, prior))
     say(
         f"  start cost {cost0:.6g}"
         + (
@@ -337,7 +353,8 @@ def identify(
             else ""
         )
     )
-    prob = Problem(data.u, data.y, data.dt, sign)
+    prob = Stack.build(records, sign)
+    free = prob.expand(_free_mask(fixed, prior))
     fit_free = free.copy()
     fit_free[IW] = free[IW] and not quasi_static
     theta, sol, nfev = _multistart(
@@ -347,14 +364,14 @@ def identify(
     if free[IW] and not fit_free[IW] and _resonance_matters(fit, say):
         # the record does see the dynamics: free the resonance (before any delay,
         # which could otherwise stand in for the resonance's phase lag)
-        _free_resonance(fit, data, free, max_nfev)
-    delay = _search_delay(fit, data, max_nfev, say)
+        _free_resonance(fit, records, free, max_nfev)
+    delay = _search_delay(fit, records, max_nfev, say)
     resonance_held, alternatives = None, []
     if free[IW] and not fit.free[IW]:
-        resonance_held = _hold_quasi_static(fit, data, prior, max_nfev, say)
-        alternatives = _profile(fit, data, max_nfev, say)
+        resonance_held = _hold_quasi_static(fit, records, prior, max_nfev, say)
+        alternatives = _profile(fit, max_nfev, say)
     elif free[IW]:
-        resonance_held, alternatives = _resonance(fit, data, prior, max_nfev, say)
+        resonance_held, alternatives = _resonance(fit, records, prior, max_nfev, say)
     # intervals with the resonance free even when it is held: they must not pretend
     # that a resonance the record cannot see is known
     cov_free = fit.free.copy()
@@ -370,40 +387,53 @@ def identify(
         n_starts=multistart,
         seconds=time.perf_counter() - tic,
     )
-    return build_result(fit.prob, outcome, data=data, validation=validation, name=name)
+    return build_result(fit.prob, outcome, data=records, validation=valids, name=name)
+
+
+def _records(data: Any, what: str) -> list[IdentificationData]:
+    """One record or a non-empty sequence of them, as a list."""
+    if isinstance(data, IdentificationData):
+        return [data]
+    items = list(data) if isinstance(data, list | tuple) else None
+    if not items or not all(isinstance(r, IdentificationData) for r in items):
+        raise InputError(
+            f"{what} must be an IdentificationData or a non-empty list of them (use "
+            "bwdesign.identify.load_data)"
+        )
+    return items
 
 
 @dataclass
 class _Fit:
     """The search so far: the problem (input delay), the optimum, what is free, the cost."""
 
-    prob: Problem
+    prob: Stack
     theta: np.ndarray
     sol: Any
     free: np.ndarray
     nfev: int
 
 
-def _search_delay(fit: _Fit, data: IdentificationData, max_nfev: int, say) -> int:
-    """The input delay (samples) that earns its place; ``fit`` moves to it."""
+def _search_delay(fit: _Fit, records: list[IdentificationData], max_nfev: int, say) -> int:
+    """The input delay (samples, the same for every record) that earns its place; ``fit``
+    moves to it."""
     delay = 0
     for d in _DELAYS[1:]:
         # a delay must earn its place: a likelihood-ratio gain above chi2(1, 0.999)
-        trial = Problem(delayed_input(data.u, d), data.y, data.dt, fit.prob.sign)
+        trial = Stack.build(records, fit.prob.sign, delay=d)
         th_d, sol_d = _refine(trial, fit.theta, fit.free, max_nfev)
         fit.nfev += sol_d.nfev
-        if not data.n * math.log(fit.sol.cost / max(sol_d.cost, 1e-300)) > _LR_DELAY:
+        if not trial.n * math.log(fit.sol.cost / max(sol_d.cost, 1e-300)) > _LR_DELAY:
             break
         say(f"  input delay {d} sample(s): cost {2 * sol_d.cost:.6g}")
         delay, fit.theta, fit.sol, fit.prob = d, th_d, sol_d, trial
     return delay
 
 
-def _free_resonance(fit: _Fit, data: IdentificationData, free: np.ndarray, max_nfev: int):
+def _free_resonance(fit: _Fit, records: list[IdentificationData], free: np.ndarray, max_nfev: int):
     """Refit with the resonance free: from the quasi-static optimum and from a grid
     over resonance and damping at its hysteresis shape; the lower misfit wins."""
-    m = min(data.n, START_SAMPLES)
-    window = Problem(data.u[:m], data.y[:m], data.dt, fit.prob.sign)
+    window = Stack.build(records, fit.prob.sign, window=START_SAMPLES)
     th = _grid_linear(window, fit.theta, free)[1]
     th = _grid_hysteresis(window, th, free)[1]
     best = None
@@ -424,29 +454,27 @@ def _resonance_matters(fit: _Fit, say) -> bool:
     """
     free = fit.free.copy()
     free[IW] = True
-    free[IOFF] = False
-    r = fit.prob.residual(fit.theta)
-    r = r - r.mean()
-    jac = fit.prob.jacobian(fit.theta, free)
-    jac -= jac.mean(axis=0)
+    free[fit.prob.i_off] = False
+    r = fit.prob.centre(fit.prob.residual(fit.theta))
+    jac = fit.prob.centre(fit.prob.jacobian(fit.theta, free))
     u, s, _ = np.linalg.svd(jac, full_matrices=False)
     ok = s > s[0] * 1e-10
     decrease = float(np.sum((u[:, ok].T @ r) ** 2))
-    s2 = float(r @ r) / max(1, r.size - int(free.sum()) - 1)
+    s2 = float(r @ r) / max(1, r.size - int(free.sum()) - fit.prob.n_records)
     stat = decrease / s2
     say(f"  score test for a free resonance: {stat:.3g} noise variances (threshold {_LR_DELAY:g})")
     return stat > _LR_DELAY
 
 
 def _hold_quasi_static(
-    fit: _Fit, data: IdentificationData, prior: BoucWenParams | None, max_nfev: int, say
+    fit: _Fit, records: list[IdentificationData], prior: BoucWenParams | None, max_nfev: int, say
 ) -> tuple[str, float, float, float]:
     """Hold the resonance of a quasi-static fit at init's or the stated default."""
     theta = fit.theta
     if prior is not None:
         src, wn_hold = "init", math.sqrt(prior.a1)
     else:
-        src, wn_hold = "default", max(math.pi / data.dt, 2.0 / math.exp(theta[ITAU]))
+        src, wn_hold = "default", max(math.pi / fit.prob.dt, 2.0 / math.exp(theta[ITAU]))
     if abs(math.log(wn_hold) - theta[IW]) > 1e-12:
         theta = theta.copy()
         theta[IW] = math.log(wn_hold)
@@ -456,7 +484,7 @@ def _hold_quasi_static(
     cov_free[IW] = True
     rel = _rel_halfwidth(fit.prob, fit.theta, cov_free, IW)
     f_r = wn_hold / (2 * math.pi)
-    band = _band_fraction(data.u, data.dt, f_r / 3.0, 3.0 * f_r)
+    band = _band(records, f_r / 3.0, 3.0 * f_r)
     say(
         f"  the resonance is not determined by these data (input power within a factor 3 "
         f"of {f_r:.4g} Hz: {band:.3g} of the total); holding it there"
@@ -465,7 +493,7 @@ def _hold_quasi_static(
 
 
 def _resonance(
-    fit: _Fit, data: IdentificationData, prior: BoucWenParams | None, max_nfev: int, say
+    fit: _Fit, records: list[IdentificationData], prior: BoucWenParams | None, max_nfev: int, say
 ) -> tuple[tuple[str, float, float, float] | None, list[np.ndarray]]:
     """Whether the record determines a freely fitted resonance; if not, hold and profile it.
 
@@ -476,19 +504,19 @@ def _resonance(
     theta, prob = fit.theta, fit.prob
     rel = _rel_halfwidth(prob, theta, fit.free, IW)
     f_r = math.exp(theta[IW]) / (2 * math.pi)
-    band = _band_fraction(data.u, data.dt, f_r / 3.0, 3.0 * f_r)
+    band = _band(records, f_r / 3.0, 3.0 * f_r)
     say(f"  resonance {f_r:.4g} Hz: input power within [f/3, 3f]: {band:.3g} of the total")
     if rel < DETERMINED_REL and band >= MIN_BAND_FRACTION:
         return None, []
     tau = math.exp(theta[ITAU])
     if prior is not None:
         src, wn_hold = "init", math.sqrt(prior.a1)
-    elif rel < DETERMINED_REL and f_r < 0.5 / data.dt:
+    elif rel < DETERMINED_REL and f_r < 0.5 / prob.dt:
         # the low-frequency curvature placed it inside the record's band: a
         # guess worth keeping, but not a determination
         src, wn_hold = "curvature", math.exp(theta[IW])
     else:
-        src, wn_hold = "default", max(math.pi / data.dt, 2.0 / tau)
+        src, wn_hold = "default", max(math.pi / prob.dt, 2.0 / tau)
     say(
         f"  the resonance is not determined by these data (95 % half-width "
         f"{100 * rel:.3g} % of sqrt(a1)); holding it at {wn_hold / (2 * math.pi):.4g} Hz"
@@ -500,15 +528,15 @@ def _resonance(
         theta[IW] = math.log(wn_hold)
         fit.theta, fit.sol = _refine(prob, theta, fit.free, max_nfev)
         fit.nfev += fit.sol.nfev
-    return (src, wn_hold, rel, band), _profile(fit, data, max_nfev, say)
+    return (src, wn_hold, rel, band), _profile(fit, max_nfev, say)
 
 
-def _profile(fit: _Fit, data: IdentificationData, max_nfev: int, say) -> list[np.ndarray]:
+def _profile(fit: _Fit, max_nfev: int, say) -> list[np.ndarray]:
     """Other resonances that fit the record as well (they widen the intervals)."""
     alternatives: list[np.ndarray] = []
     held = fit.free.copy()
     held[IW] = False
-    s2 = 2.0 * fit.sol.cost / max(1, data.n - int(held.sum()))
+    s2 = 2.0 * fit.sol.cost / max(1, fit.prob.n - int(held.sum()))
     for factor in _PROFILE_FACTORS:
         th_k = fit.theta.copy()
         th_k[IW] += math.log(factor)
@@ -518,6 +546,11 @@ def _profile(fit: _Fit, data: IdentificationData, max_nfev: int, say) -> list[np
             alternatives.append(th_k)
     say(f"  {len(alternatives)} other resonance(s) fit as well: intervals widened")
     return alternatives
+
+
+def _band(records: list[IdentificationData], f_lo: float, f_hi: float) -> float:
+    """The largest share of a record's input power within ``[f_lo, f_hi]`` Hz."""
+    return max(_band_fraction(r.u, r.dt, f_lo, f_hi) for r in records)
 
 
 def _band_fraction(u: np.ndarray, dt: float, f_lo: float, f_hi: float) -> float:
@@ -532,7 +565,7 @@ def _band_fraction(u: np.ndarray, dt: float, f_lo: float, f_hi: float) -> float:
     return float(power[(f >= f_lo) & (f <= f_hi)].sum() / total)
 
 
-def _rel_halfwidth(prob: Problem, theta: np.ndarray, free: np.ndarray, index: int) -> float:
+def _rel_halfwidth(prob: Stack, theta: np.ndarray, free: np.ndarray, index: int) -> float:
     """95 % half-width of exp(theta[index]) relative to its value (white-noise estimate)."""
     jac = prob.jacobian(theta, free)
     r = prob.residual(theta)

@@ -117,15 +117,20 @@ class Problem:
         Sample time (s).
     sign : float
         Sign of the static gain.
+    y_scale : float, optional
+        Output scale of the residual (default: the standard deviation of ``y``;
+        records fitted together share one, :class:`bwdesign.identify.stack.Stack`).
     """
 
-    def __init__(self, u: np.ndarray, y: np.ndarray, dt: float, sign: float):
+    def __init__(
+        self, u: np.ndarray, y: np.ndarray, dt: float, sign: float, *, y_scale: float | None = None
+    ):
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.dt = float(dt)
         self.sign = float(sign)
         self.y_mean = float(np.mean(y))
-        self.y_scale = float(np.std(y)) or 1.0
+        self.y_scale = float(y_scale) if y_scale is not None else (float(np.std(y)) or 1.0)
         self.segments = Segments(self.u)
         self._cache: dict[tuple[float, float, float], np.ndarray] = {}
         self._sens: tuple[tuple[float, float, float], np.ndarray, np.ndarray] | None = None

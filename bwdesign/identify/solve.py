@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .problem import IOFF, Problem
+from .problem import Problem
+from .stack import Stack
 
 __all__ = ["Solution", "solve", "STEP_TOL"]
 
@@ -50,16 +51,8 @@ class Solution:
     step: float
 
 
-def _offset_projected(prob: Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    r = prob.residual(theta)
-    m = float(np.mean(r)) if np.all(np.isfinite(r)) else 0.0
-    theta = theta.copy()
-    theta[IOFF] -= m
-    return theta, r - m
-
-
 def solve(
-    prob: Problem,
+    prob: Problem | Stack,
     theta0: np.ndarray,
     free: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray],
@@ -67,16 +60,22 @@ def solve(
     max_nfev: int = 200,
     step_tol: float = STEP_TOL,
 ) -> tuple[np.ndarray, Solution]:
-    """Minimise the misfit over the ``free`` coordinates of ``theta0`` (offset projected).
+    """Minimise the misfit over the ``free`` coordinates of ``theta0`` (offsets projected).
 
-    ``bounds`` are full-length (10) lower and upper limits; a coordinate on its
-    limit with the descent pointing outside is held for that iteration.
+    ``prob``: one record's problem or a :class:`~bwdesign.identify.stack.Stack` of
+    several (each record's offset projected out). ``bounds`` are full-length lower
+    and upper limits; a coordinate on its limit with the descent pointing outside
+    is held for that iteration.
     """
+    if isinstance(prob, Problem):
+        prob = Stack([prob])
     lo, hi = bounds
-    idx = np.flatnonzero(free & (np.arange(free.size) != IOFF))
+    offset = np.zeros(free.size, dtype=bool)
+    offset[prob.i_off] = True
+    idx = np.flatnonzero(free & ~offset)
     jfree = np.zeros_like(free)
     jfree[idx] = True
-    theta, r = _offset_projected(prob, np.clip(theta0, lo, hi))
+    theta, r = prob.project_offsets(np.clip(theta0, lo, hi))
     nfev, njev, cost = 1, 0, 0.5 * float(r @ r)
     if not math.isfinite(cost):
         return theta, Solution(cost, nfev, njev, 0, "the start is not finite", math.inf)
@@ -85,7 +84,7 @@ def solve(
     while True:
         jac = prob.jacobian(theta, jfree)
         njev += 1
-        jac -= jac.mean(axis=0)
+        jac = prob.centre(jac)
         grad = jac.T @ r
         x = theta[idx]
         keep = ~(((x <= lo[idx] + 1e-12) & (grad > 0)) | ((x >= hi[idx] - 1e-12) & (grad < 0)))
@@ -95,7 +94,7 @@ def solve(
         u, s, vt = np.linalg.svd(jk / scale, full_matrices=False)
         ok = s > s[0] * _RANK_TOL if s.size and s[0] > 0 else np.zeros(s.size, dtype=bool)
         proj = u[:, ok].T @ r
-        sigma = math.sqrt(2.0 * cost / max(1, n - int(ok.sum()) - 1)) or 1e-300
+        sigma = math.sqrt(2.0 * cost / max(1, n - int(ok.sum()) - prob.n_records)) or 1e-300
         crit = float(np.max(np.abs(proj))) / sigma if proj.size else 0.0
         if crit < step_tol:
             return theta, Solution(cost, nfev, njev, 1, _msg(crit), crit)
@@ -117,7 +116,7 @@ def solve(
             step = -(vt.T @ (s / (s * s + lam) * proj)) / scale
             trial = theta.copy()
             trial[idx[keep]] = np.clip(x[keep] + step, lo[idx[keep]], hi[idx[keep]])
-            trial, rt = _offset_projected(prob, trial)
+            trial, rt = prob.project_offsets(trial)
             nfev += 1
             ct = 0.5 * float(rt @ rt)
             if math.isfinite(ct) and ct < cost:
