@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from ..identify import identify, load_data
+from ..identify.result import Z95
 from ..identify.stagefile import stage_toml
 from ..output.files import prepare_directory, prepare_file
 from ..output.jsonenc import dump_json
@@ -22,8 +23,20 @@ __all__ = ["identify_args", "run_identify"]
 
 def identify_args(p: argparse.ArgumentParser) -> None:
     """Arguments of ``bwdesign identify``."""
-    p.add_argument("--data", required=True, metavar="TRAIN.csv", help="training record (.csv/.npz)")
-    p.add_argument("--validate", metavar="VALID.csv", help="held-out record for the fit percent")
+    p.add_argument(
+        "--data",
+        required=True,
+        action="append",
+        metavar="TRAIN.csv",
+        help="training record (.csv/.npz); repeat it to fit several records together (any "
+        "amplitudes and sample rates: one parameter set, an offset and initial state each)",
+    )
+    p.add_argument(
+        "--validate",
+        action="append",
+        metavar="VALID.csv",
+        help="held-out record for the fit percent (may be repeated)",
+    )
     p.add_argument(
         "--columns", metavar="T,U,Y", help="names of the time, input, output columns (t,u,y)"
     )
@@ -64,8 +77,8 @@ def run_identify(args: argparse.Namespace) -> int:
         report = prepare_directory(
             args.report, command="identify --report", force=args.force, what="--report"
         )
-    data = load_data(args.data, columns=args.columns)
-    valid = load_data(args.validate, columns=args.columns) if args.validate else None
+    data = [load_data(path, columns=args.columns) for path in args.data]
+    valid = [load_data(path, columns=args.columns) for path in args.validate or ()] or None
     fixed = tuple(f.strip() for f in args.fixed.split(",")) if args.fixed else ()
 
     def say(msg: str) -> None:
@@ -80,7 +93,7 @@ def run_identify(args: argparse.Namespace) -> int:
         multistart=args.multistart,
         seed=args.seed,
         max_nfev=args.max_nfev,
-        name=args.name or Path(args.data).stem,
+        name=args.name or Path(args.data[0]).stem,
         progress=say,
     )
     doc = result.to_dict()
@@ -110,6 +123,12 @@ def run_identify(args: argparse.Namespace) -> int:
         fp = result.fit_percent
         val = f", validation {fp['validation']:.2f} %" if fp["validation"] is not None else ""
         print(f"{out}: fit {fp['train']:.2f} %{val}; residual RMS {result.residual_rms:.3g} um")
+        if len(result.records) > 1:
+            for rec in result.records:
+                print(
+                    f"  {rec['source']}: fit {rec['fit_percent']:.2f} %, sensor offset "
+                    f"{rec['offset']:.6g} ± {Z95 * rec['offset_std_err']:.2g} um"
+                )
         for note in result.diagnostics:
             print(f"note: {note}")
     return EXIT_OK
