@@ -136,3 +136,22 @@ def test_cli_bad_row_in_second_file_names_it(tmp_path, capsys, records):
     assert rc == 2
     assert len(err) == 1 and err[0].startswith("error:") and b in err[0] and "row 7" in err[0]
     assert not out.exists()
+
+
+def test_a_record_that_sees_the_resonance_frees_it_for_all(records):
+    """A slow sine alone cannot place the resonance; with a multisine record it is fitted."""
+    from bwdesign.identify.excite import design_excitation
+
+    fs = 5000.0
+    _, u = design_excitation(
+        PLANT, umin=0, umax=120, udot_max=2000, duration=0.6, dt=1 / fs, seed=2
+    )
+    x = simulate_zoh(PLANT, u, 1 / fs, np.zeros(3), u_prev=u[0])[1:, 0]
+    y = x + 3.0 + 0.01 * np.random.default_rng(5).standard_normal(u.size)
+    ms = IdentificationData.from_arrays(np.arange(u.size) / fs, u, y, source="multisine")
+    joint = identify([records[0], ms])
+    assert joint.converged, joint.reason
+    assert joint.determined["a1"] and joint.determined["a2"]
+    for n in ("a1", "a2", "a3"):
+        lo, hi = joint.ci95[n]
+        assert lo <= getattr(PLANT, n) <= hi, (n, joint.ci95[n])
