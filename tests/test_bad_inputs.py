@@ -188,6 +188,25 @@ def _record(*, u: float | None = None, y: float | None = None, dt: float = 1e-3)
     return make
 
 
+def _second_record(*, nan_row: int | None = None, gap_after: int | None = None):
+    """A good ``rec.csv`` and a second record ``rec2.csv`` at another sample rate with a NaN at
+    data row ``nan_row`` or a gap in t after data row ``gap_after``."""
+
+    def make(tmp: Path) -> None:
+        _record()(tmp)
+        k = np.arange(500)
+        t = k * 2e-4 + np.where(k >= (gap_after or 10**9), 5 * 2e-4, 0.0)
+        u = 5 + 4 * np.sin(0.02 * k)
+        y = 1.4 * u
+        if nan_row is not None:
+            y[nan_row - 1] = np.nan
+        cols = zip(t.tolist(), u.tolist(), y.tolist(), strict=True)
+        rows = "\n".join(f"{a!r},{b!r},{c!r}" for a, b, c in cols)
+        (tmp / "rec2.csv").write_text("t,u,y\n" + rows + "\n")
+
+    return make
+
+
 def _with_record(setup: Callable[[Path], None]) -> Callable[[Path], None]:
     def make(tmp: Path) -> None:
         setup(tmp)
@@ -416,6 +435,19 @@ CASES: list[tuple[str, list[str], Callable[[Path], None] | None, str]] = [
         "pass --force",
     ),  # fmt: skip
     ("identify --force without --report", [*IDENT, "--force"], _record(), "applies to --report"),
+    # -- issue 26: several records in one fit: each file's errors name it ------------
+    (
+        "identify a NaN row in the second --data",
+        [*IDENT[:3], "--data", "rec2.csv", *IDENT[3:]],
+        _second_record(nan_row=7),
+        "rec2.csv: 1 row(s) with NaN or infinite values, first at data row 7",
+    ),  # fmt: skip
+    (
+        "identify a gap in t in the second --data",
+        [*IDENT[:3], "--data", "rec2.csv", *IDENT[3:]],
+        _second_record(gap_after=300),
+        "rec2.csv: a gap in t between data rows 300 and 301",
+    ),  # fmt: skip
     (
         "TOML nested 3000 deep",
         ["params", *STAGE],

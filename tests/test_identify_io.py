@@ -59,6 +59,12 @@ BAD = [
         _with(_rows(), 50, 0, 0.0503),
         r"not uniformly sampled.*tolerance 0.1 %",
     ),
+    (
+        "gap_in_t",
+        "t,u,y",
+        _rows(t=np.concatenate((GOOD_T[:120], GOOD_T[125:] + 0.0)), u=GOOD_U[:395], y=GOOD_Y[:395]),
+        r"a gap in t between data rows 120 and 121.*about 5 missing sample",
+    ),
     ("too_few", "t,u,y", _rows()[: MIN_SAMPLES - 1], rf"needs at least {MIN_SAMPLES}"),
     ("input_never_moves", "t,u,y", _rows(u=np.full(400, 2.0)), r"input u never moves"),
     ("output_never_moves", "t,u,y", _rows(y=np.zeros(400)), r"output y never moves"),
@@ -73,7 +79,10 @@ def test_bad_data_table(tmp_path, header, rows, match):
         load_data(path)
 
 
-@pytest.mark.parametrize("header,rows,match", [b[1:] for b in BAD[:3]], ids=[b[0] for b in BAD[:3]])
+CLI_BAD = [b for b in BAD if b[0] in ("missing_column", "non_numeric", "nan_row", "gap_in_t")]
+
+
+@pytest.mark.parametrize("header,rows,match", [b[1:] for b in CLI_BAD], ids=[b[0] for b in CLI_BAD])
 def test_bad_data_exit_2_nothing_written(tmp_path, capsys, header, rows, match):
     path = _csv(tmp_path / "d.csv", header, rows)
     out = tmp_path / "stage.toml"
@@ -250,7 +259,9 @@ def test_identify_not_converged_exit_1(records, capsys, tmp_path):
         ]
     )
     assert rc == 1
-    assert "did not converge" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "did not converge" in err and "what would help" in err
+    assert "best fit found (not written): train" in err
     assert not out.exists()
 
 

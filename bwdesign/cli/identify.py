@@ -1,7 +1,8 @@
 """``bwdesign identify``: a measured record in, a stage TOML (and a report) out.
 
-Exit codes: 0 fitted; 1 the fit did not converge (the reason on stderr, nothing
-written); 2 bad input with one ``error:`` line (nothing written).
+Exit codes: 0 fitted; 1 the fit did not converge (the reason, what would help and
+the best fit found on stderr, nothing written); 2 bad input with one ``error:`` line
+(nothing written).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import sys
 from pathlib import Path
 
 from ..identify import identify, load_data
+from ..identify.result import Z95
 from ..identify.stagefile import stage_toml
 from ..output.files import prepare_directory, prepare_file
 from ..output.jsonenc import dump_json
@@ -21,8 +23,20 @@ __all__ = ["identify_args", "run_identify"]
 
 def identify_args(p: argparse.ArgumentParser) -> None:
     """Arguments of ``bwdesign identify``."""
-    p.add_argument("--data", required=True, metavar="TRAIN.csv", help="training record (.csv/.npz)")
-    p.add_argument("--validate", metavar="VALID.csv", help="held-out record for the fit percent")
+    p.add_argument(
+        "--data",
+        required=True,
+        action="append",
+        metavar="TRAIN.csv",
+        help="training record (.csv/.npz); repeat it to fit several records together (any "
+        "amplitudes and sample rates: one parameter set, an offset and initial state each)",
+    )
+    p.add_argument(
+        "--validate",
+        action="append",
+        metavar="VALID.csv",
+        help="held-out record for the fit percent (may be repeated)",
+    )
     p.add_argument(
         "--columns", metavar="T,U,Y", help="names of the time, input, output columns (t,u,y)"
     )
@@ -63,8 +77,8 @@ def run_identify(args: argparse.Namespace) -> int:
         report = prepare_directory(
             args.report, command="identify --report", force=args.force, what="--report"
         )
-    data = load_data(args.data, columns=args.columns)
-    valid = load_data(args.validate, columns=args.columns) if args.validate else None
+    data = [load_data(path, columns=args.columns) for path in args.data]
+    valid = [load_data(path, columns=args.columns) for path in args.validate or ()] or None
     fixed = tuple(f.strip() for f in args.fixed.split(",")) if args.fixed else ()
 
     def say(msg: str) -> None:
@@ -79,14 +93,23 @@ def run_identify(args: argparse.Namespace) -> int:
         multistart=args.multistart,
         seed=args.seed,
         max_nfev=args.max_nfev,
-        name=args.name or Path(args.data).stem,
+        name=args.name or Path(args.data[0]).stem,
         progress=say,
     )
     doc = result.to_dict()
     if not result.converged:
         if args.json:
             print(dump_json(doc))
-        print(f"identify: the fit did not converge: {result.reason}", file=sys.stderr)
+        fp = result.fit_percent
+        val = f", validation {fp['validation']:.2f} %" if fp["validation"] is not None else ""
+        p = result.params
+        print(
+            f"identify: the fit did not converge: {result.reason}\n"
+            f"identify: best fit found (not written): train {fp['train']:.2f} %{val}, "
+            f"a1={p.a1:.6g} a2={p.a2:.6g} a3={p.a3:.6g} alpha={p.alpha:.6g} "
+            f"beta={p.beta:.6g} gamma={p.gamma:.6g}, offset {result.offset:.6g} um",
+            file=sys.stderr,
+        )
         return EXIT_NO
     target.write_text(stage_toml(result, data))
     doc["out"] = str(out)
@@ -100,6 +123,12 @@ def run_identify(args: argparse.Namespace) -> int:
         fp = result.fit_percent
         val = f", validation {fp['validation']:.2f} %" if fp["validation"] is not None else ""
         print(f"{out}: fit {fp['train']:.2f} %{val}; residual RMS {result.residual_rms:.3g} um")
+        if len(result.records) > 1:
+            for rec in result.records:
+                print(
+                    f"  {rec['source']}: fit {rec['fit_percent']:.2f} %, sensor offset "
+                    f"{rec['offset']:.6g} ± {Z95 * rec['offset_std_err']:.2g} um"
+                )
         for note in result.diagnostics:
             print(f"note: {note}")
     return EXIT_OK

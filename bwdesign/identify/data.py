@@ -61,8 +61,9 @@ class IdentificationData:
         ------
         InputError
             Shapes differ, a value is NaN or infinite (the first bad row is
-            named), ``t`` is not increasing or not uniform within
-            :data:`DT_TOLERANCE`, fewer than :data:`MIN_SAMPLES` samples, ``u``
+            named), ``t`` is not increasing, has a gap (a step over 1.5 times the
+            median; the rows and the missing samples are named) or is not uniform
+            within :data:`DT_TOLERANCE`, fewer than :data:`MIN_SAMPLES` samples, ``u``
             or ``y`` outside :data:`bwdesign.validate.SIGNAL`, the sample time
             outside :data:`bwdesign.validate.DT` (the range every command takes),
             or the input or the output never moves.
@@ -104,6 +105,15 @@ class IdentificationData:
         # the range every other command takes for dt: the stage file written from it must load
         real(dt, f"{where}the record's sample time dt (s)", within=DT)
         dev = np.abs(steps - dt) / dt
+        if steps.max() > 1.5 * dt:
+            k = int(np.argmax(steps))
+            missing = int(round(steps[k] / dt)) - 1
+            raise InputError(
+                f"{where}a gap in t between data rows {k + 1} and {k + 2}: t jumps from "
+                f"{t[k]:.9g} s to {t[k + 1]:.9g} s ({steps[k]:.6g} s, about {missing} missing "
+                f"sample(s) at the median step {dt:.6g} s); identification needs an unbroken "
+                "record: split it at the gap or fill it"
+            )
         if dev.max() > DT_TOLERANCE:
             k = int(np.argmax(dev))
             raise InputError(

@@ -1,31 +1,44 @@
-"""Output-error identification of the Bouc-Wen stage from one measured record.
+"""Output-error identification of the Bouc-Wen stage from one or several measured records.
+
+Several records (any amplitudes, frequencies and sample rates) are fitted as one
+:class:`~bwdesign.identify.stack.Stack`: one parameter set, an offset and an
+initial state per record. Every step below then runs over all of them: the
+quasi-static decision and the start grids use the union (a record with power
+near the resonance frees it for all), the sample time in the defaults is the
+smallest one, the input delay (in samples) is common to the records.
 
 Steps (each is seeded and deterministic):
 
 1. **Start from the data.** With the linear dynamics at a neutral default, a
-   grid over the hysteresis shape (beta times the input range, gamma/beta and
+   grid over the hysteresis shape (beta times the input range, gamma/beta, then
    the initial hysteresis state) is solved for gain, alpha, offset and initial
    state by linear least squares (the model is linear in them: ``h`` scales
-   with ``alpha``). A second grid over resonance and damping follows, then
-   the hysteresis grid once more.
-2. **Refine** all coordinates of :mod:`bwdesign.identify.problem` with
-   ``scipy.optimize.least_squares`` (trust-region reflective) from the best
-   start and from seeded perturbations of it (``multistart``).
-3. **Identifiability.** If the resonance is not determined by the data (its
-   95 % half-width exceeds 50 %, or less than 1e-5 of the input's power lies
-   between a third and three times it, as on a slow sine: a local interval
-   alone can look tight on such data while the truth lies elsewhere) it is
-   held at the prior: ``init``'s a1; else the free fit's value when that lies
-   below the Nyquist frequency with a tight local interval (the low-frequency
-   curvature of the response placed it); else the stated default
-   ``wn = max(pi/dt, 2/tau)``, at or above the Nyquist frequency and at least
-   critically damped for the fitted lag. The rest is refitted and a1, a2, a3
-   are reported as not determined. The fit is repeated with the resonance at
-   0.5 to 32 times the held value; every one that fits the record as well
-   (misfit within the chi-square 95 % quantile of noise variances) widens the
-   other intervals to cover its estimates (a local interval alone would
-   pretend the resonance is known).
-4. **Intervals** from the Jacobian at the optimum (see
+   with ``alpha``).
+2. **Quasi-static first.** When the input has less than
+   :data:`MIN_BAND_FRACTION` of its power above a third of the starting
+   resonance (init's, else a quarter of the Nyquist frequency), as on a slow
+   sine far below it, the record cannot place the resonance: it is held from
+   the start (init's a1, else the stated default ``wn = max(pi/dt, 2/tau)``, at
+   or above the Nyquist frequency and at least critically damped for the
+   fitted lag) and the quasi-static model (gain, lag, hysteresis, offset,
+   initial state) is fitted. A score test then asks whether freeing the
+   resonance would lower the misfit by more than chi-square(1, 0.999); only then
+   is it fitted. Otherwise a grid over resonance and damping and the
+   hysteresis grid once more give the start of the full model.
+3. **Refine** with :func:`bwdesign.identify.solve.solve` (Levenberg-Marquardt,
+   exact Jacobian, the offset in closed form, converged when the remaining
+   step is a small fraction of a standard error in every determined
+   direction) from the start and from ``multistart - 1`` seeded perturbations
+   of the optimum (a perturbation that ends lower replaces it).
+4. **Identifiability.** A resonance found free but with a 95 % half-width over
+   50 % or less than 1e-5 of the input's power between a third and three
+   times it is held as above (or at the free fit's value when that lies below
+   the Nyquist frequency with a tight local interval: the low-frequency
+   curvature placed it); a1, a2, a3 are reported as not determined. The fit is
+   repeated with the resonance at 0.5 to 32 times the held value; every one
+   that fits the record as well (misfit within the chi-square 95 % quantile of
+   noise variances) widens the other intervals to cover its estimates.
+5. **Intervals** from the Jacobian at the optimum (see
    :mod:`bwdesign.identify.result`).
 """
 
@@ -33,12 +46,11 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..errors import InputError
 from ..model.params import BoucWenParams
@@ -47,20 +59,17 @@ from .data import IdentificationData
 from .problem import (
     IA,
     IB,
-    IE1,
-    IE2,
     IK,
-    IOFF,
     IQ,
     ITAU,
     IW,
     IZ,
     Q_MAX,
-    Problem,
-    delayed_input,
     theta_from_params,
 )
 from .result import FitOutcome, IdentificationResult, build_result
+from .solve import Solution, solve
+from .stack import Stack
 
 __all__ = ["identify", "NAMES"]
 
@@ -73,6 +82,8 @@ MULTISTART = Range(1, math.inf)
 #: Least share of the input's power within a third and three times the fitted
 #: resonance for the resonance to count as seen (besides a tight interval).
 MIN_BAND_FRACTION = 1e-5
+#: Samples the start grids score (the fit itself uses the whole record).
+START_SAMPLES = 10_000
 #: Resonances (times the held one) refitted to see which fit the record as well.
 _PROFILE_FACTORS = (0.5, 2.0, 4.0, 8.0, 16.0, 32.0)
 #: chi-square(1) 95 % quantile: the misfit increase (in noise variances) that still fits.
@@ -115,43 +126,56 @@ def _free_mask(fixed: Iterable[str], init: BoucWenParams | None) -> np.ndarray:
     return free
 
 
-def _grid_hysteresis(
-    prob: Problem, base: np.ndarray, free: np.ndarray
-) -> list[tuple[float, np.ndarray]]:
-    """Score a grid of hysteresis shapes (beta range, gamma/beta, h0) by linear projection."""
-    u_range = float(np.ptp(prob.u))
-    betas = np.geomspace(0.3, 100.0, 9) / u_range if free[IB] else [math.exp(base[IB])]
+def _grid_hysteresis(prob: Stack, base: np.ndarray, free: np.ndarray) -> tuple[float, np.ndarray]:
+    """Best hysteresis shape (beta range x gamma/beta x h0) by linear projection.
+
+    Several records: one h0 for all on the grid, then each record's h0 in turn.
+    """
+    betas = np.geomspace(0.3, 100.0, 9) / prob.u_range if free[IB] else [math.exp(base[IB])]
     qs = (-1.0, 0.0, 1.0) if free[IQ] else (base[IQ],)
-    out = []
+    best = None  # ties (all infinite: no positive gain and alpha) keep the first point
     for beta in betas:
         for q in qs:
             for z in (-0.8, 0.0, 0.8):
                 th = base.copy()
-                th[IB], th[IQ], th[IZ] = math.log(beta), q, z
-                cost, th = prob.project(th)
-                out.append((cost, th))
-    out.sort(key=lambda c: c[0])
-    return out
+                th[IB], th[IQ], th[prob.i_z] = math.log(beta), q, z
+                scored = prob.project(th)
+                if best is None or scored[0] < best[0]:
+                    best = scored
+    for k in range(prob.n_records if prob.n_records > 1 else 0):
+        th = best[1]
+        for z in (-0.8, 0.0, 0.8):
+            trial = th.copy()
+            trial[prob.i_z[k]] = z
+            scored = prob.project(trial)
+            if scored[0] < best[0]:
+                best = scored
+    return best
 
 
-def _grid_linear(prob: Problem, base: np.ndarray, free: np.ndarray) -> tuple[float, np.ndarray]:
-    """Score a grid of resonance x damping by linear projection at a fixed hysteresis shape."""
+def _grid_linear(
+    prob: Stack, base: np.ndarray, free: np.ndarray, *, quasi_static: bool = False
+) -> tuple[float, np.ndarray]:
+    """Score a grid of resonance x damping (quasi-static: of the lag, the resonance
+    held) by linear projection at a fixed hysteresis shape."""
     nyq = math.pi / prob.dt
-    duration = prob.u.size * prob.dt
-    wns = (
-        np.geomspace(max(2.0 * math.pi * 2.0 / duration, nyq * 1e-3), 10.0 * nyq, 28)
-        if free[IW]
-        else [math.exp(base[IW])]
-    )
-    zetas = (0.02, 0.06, 0.2, 0.6, 1.5) if free[ITAU] else (None,)
+    duration = prob.duration
+    if quasi_static or not free[IW]:
+        wns = [math.exp(base[IW])]
+    else:
+        wns = np.geomspace(max(2.0 * math.pi * 2.0 / duration, nyq * 1e-3), 10.0 * nyq, 28)
     h_unit = prob.unit_hysteresis(base)
     best = (math.inf, base)
     for wn in wns:
-        for zeta in zetas:
+        if not free[ITAU]:
+            taus = [math.exp(base[ITAU])]
+        elif quasi_static:
+            taus = np.geomspace(0.1 * prob.dt, duration / 20.0, 16)
+        else:
+            taus = [2.0 * zeta / wn for zeta in (0.02, 0.06, 0.2, 0.6, 1.5)]
+        for tau in taus:
             th = base.copy()
-            th[IW] = math.log(wn)
-            if zeta is not None:
-                th[ITAU] = math.log(2.0 * zeta / wn)
+            th[IW], th[ITAU] = math.log(wn), math.log(tau)
             cost, th = prob.project(th, h_unit)
             if cost < best[0]:
                 best = (cost, th)
@@ -159,74 +183,73 @@ def _grid_linear(prob: Problem, base: np.ndarray, free: np.ndarray) -> tuple[flo
 
 
 def _start(
-    data: IdentificationData, init: BoucWenParams | None, free: np.ndarray
-) -> tuple[np.ndarray, float, float]:
-    """Start vector, gain sign and its cost, derived from the data (and init)."""
-    coef = np.polyfit(data.u, data.y, 1)
+    records: list[IdentificationData], init: BoucWenParams | None, free: np.ndarray
+) -> tuple[np.ndarray, float, float, bool]:
+    """Start vector, gain sign, its cost, and whether the start is quasi-static.
+
+    Quasi-static: no record's input has :data:`MIN_BAND_FRACTION` of its power
+    above a third of the starting resonance (init's, else a quarter of the
+    highest Nyquist frequency), so the records cannot place it; the resonance is
+    then held (at init's, else at that Nyquist frequency) and not gridded.
+    """
+    u = np.concatenate([r.u - np.mean(r.u) for r in records])
+    y = np.concatenate([r.y - np.mean(r.y) for r in records])
+    coef = np.polyfit(u, y, 1)
     sign = math.copysign(1.0, coef[0]) if init is None else math.copysign(1.0, init.a3)
+    dt = min(r.dt for r in records)
     if init is not None:
         base, sign = theta_from_params(init)
     else:
-        wn = 0.5 * math.pi / data.dt
+        wn = 0.5 * math.pi / dt
         base = np.zeros(10)
         base[IW] = math.log(wn)
         base[ITAU] = math.log(2.0 * 0.7 / wn)
-        base[IB] = math.log(1.0 / float(np.ptp(data.u)))
-    prob = Problem(data.u, data.y, data.dt, sign)
+        u_range = max(r.u.max() for r in records) - min(r.u.min() for r in records)
+        base[IB] = math.log(1.0 / float(u_range))
+    f_r = math.exp(base[IW]) / (2 * math.pi)
+    quasi_static = bool(free[IW] and _band(records, f_r / 3.0, math.inf) < MIN_BAND_FRACTION)
+    # the start is scored on the first START_SAMPLES samples of each record (a slow
+    # sine's first periods place the loop as well as all of them)
+    prob = Stack.build(records, sign, window=START_SAMPLES)
     if init is not None:
-        # keep init's values; only the offset and initial state from the data
-        th = base.copy()
-        scores = []
-        for z in (-0.8, 0.0, 0.8):
-            trial = th.copy()
-            trial[IZ] = z
-            scores.append((prob.project(trial)[0], z))
-        th[IZ] = min(scores)[1]
+        # keep init's values; only the offsets and initial states from the data
+        th = prob.expand(base)
+        for k in range(prob.n_records):
+            scores = []
+            for z in (-0.8, 0.0, 0.8):
+                trial = th.copy()
+                trial[prob.i_z[k]] = z
+                scores.append((prob.project(trial)[0], z))
+            th[prob.i_z[k]] = min(scores)[1]
         cost, proj = prob.project(th)
-        th[IOFF], th[IE1], th[IE2] = proj[IOFF], proj[IE1], proj[IE2]
-        return th, sign, cost
-    th = _grid_hysteresis(prob, base, free)[0][1]
-    th = _grid_linear(prob, th, free)[1]
-    cost, th = _grid_hysteresis(prob, th, free)[0]
-    return th, sign, cost
+        for i in (prob.i_off, prob.i_e1, prob.i_e2):
+            th[i] = proj[i]
+        return th, sign, cost, quasi_static
+    if quasi_static:
+        base[IW] = math.log(math.pi / dt)
+        base[ITAU] = math.log(2.0 * 0.7 * dt / math.pi)
+    th = _grid_hysteresis(prob, prob.expand(base), free)[1]
+    th = _grid_linear(prob, th, free, quasi_static=quasi_static)[1]
+    cost, th = _grid_hysteresis(prob, th, free)
+    return th, sign, cost, quasi_static
 
 
-def _bounds(start: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    lo = np.full(10, -np.inf)
-    hi = np.full(10, np.inf)
+def _bounds(start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.full(start.size, -np.inf)
+    hi = np.full(start.size, np.inf)
     for i in (IK, ITAU, IW, IA, IB):
         lo[i], hi[i] = start[i] - 12.0, start[i] + 12.0
     lo[IQ], hi[IQ] = -Q_MAX, Q_MAX
-    lo[IZ], hi[IZ] = -5.0, 5.0
-    return lo[free], hi[free]
+    lo[IZ::4], hi[IZ::4] = -5.0, 5.0  # each record's h0
+    return lo, hi
 
 
-def _refine(prob: Problem, start: np.ndarray, free: np.ndarray, max_nfev: int):
-    lo, hi = _bounds(start, free)
-    x0 = np.clip(start[free], lo + 1e-9, hi - 1e-9)
-
-    def full(x: np.ndarray) -> np.ndarray:
-        th = start.copy()
-        th[free] = x
-        return th
-
-    sol = least_squares(
-        lambda x: prob.residual(full(x)),
-        x0,
-        jac=lambda x: prob.jacobian(full(x), free),
-        bounds=(lo, hi),
-        method="trf",
-        x_scale=1.0,
-        xtol=1e-10,
-        ftol=1e-12,
-        gtol=1e-10,
-        max_nfev=max_nfev,
-    )
-    return full(sol.x), sol
+def _refine(prob: Stack, start: np.ndarray, free: np.ndarray, max_nfev: int):
+    return solve(prob, start, free, _bounds(start), max_nfev=max_nfev)
 
 
 def _multistart(
-    prob: Problem,
+    prob: Stack,
     start: np.ndarray,
     free: np.ndarray,
     *,
@@ -234,31 +257,35 @@ def _multistart(
     seed: int,
     max_nfev: int,
     say: Callable[[str], None],
-):
+) -> tuple[np.ndarray, Solution, int]:
+    """The derived start refined, then seeded perturbations of the optimum refined.
+
+    A perturbation that ends with a lower misfit replaces the optimum (a check
+    that the optimum is not a local one; from near it each costs a few steps).
+    """
     rng = np.random.default_rng(seed)
-    best = None
-    total = 0
-    for i in range(max(1, multistart)):
-        th0 = start.copy()
-        if i > 0:
-            scale = np.zeros(10)
-            scale[[IK, ITAU, IW, IA, IB]] = 0.3
-            scale[IQ] = 0.5
-            scale[IZ] = 0.3
-            th0 = th0 + np.where(free, scale * rng.standard_normal(10), 0.0)
-            th0[IQ] = float(np.clip(th0[IQ], -Q_MAX + 0.1, Q_MAX - 0.1))
-        th, sol = _refine(prob, th0, free, max_nfev)
-        total += sol.nfev
-        say(f"  start {i + 1}/{multistart}: cost {2 * sol.cost:.6g} after {sol.nfev} evaluations")
-        if best is None or sol.cost < best[1].cost:
-            best = (th, sol)
-    return best[0], best[1], total
+    theta, sol = _refine(prob, start, free, max_nfev)
+    total = sol.nfev
+    say(f"  start 1/{multistart}: cost {2 * sol.cost:.6g} after {sol.nfev} evaluations")
+    scale = np.zeros(theta.size)
+    scale[[IK, ITAU, IW, IA, IB]] = 0.3
+    scale[IQ] = 0.5
+    scale[IZ::4] = 0.3  # each record's h0
+    for i in range(1, max(1, multistart)):
+        th0 = theta + np.where(free, scale * rng.standard_normal(theta.size), 0.0)
+        th0[IQ] = float(np.clip(th0[IQ], -Q_MAX + 0.1, Q_MAX - 0.1))
+        th, sol_i = _refine(prob, th0, free, max_nfev)
+        total += sol_i.nfev
+        say(f"  start {i + 1}/{multistart}: cost {2 * sol_i.cost:.6g} after {sol_i.nfev} evals")
+        if sol_i.cost < sol.cost * (1 - 1e-9) and (sol_i.status > 0 or sol.status == 0):
+            theta, sol = th, sol_i
+    return theta, sol, total
 
 
 def identify(
-    data: IdentificationData,
+    data: IdentificationData | Sequence[IdentificationData],
     *,
-    validation: IdentificationData | None = None,
+    validation: IdentificationData | Sequence[IdentificationData] | None = None,
     init: str | BoucWenParams | None = None,
     fixed: Iterable[str] = (),
     multistart: int = 3,
@@ -267,16 +294,20 @@ def identify(
     name: str = "identified",
     progress: Callable[[str], None] | None = None,
 ) -> IdentificationResult:
-    """Fit (a1, a2, a3, alpha, beta, gamma) to a measured record (output error, exact ZOH model).
+    """Fit (a1, a2, a3, alpha, beta, gamma) to measured records (output error, exact ZOH model).
 
     Parameters
     ----------
-    data : IdentificationData
-        Training record (:func:`bwdesign.identify.load_data` or
-        :meth:`IdentificationData.from_arrays`); t in s, u in V, y in µm.
-    validation : IdentificationData, optional
-        Held-out record: the fit percent on it is reported (its offset and
-        initial state are re-estimated with the parameters held).
+    data : IdentificationData or sequence of IdentificationData
+        Training record(s) (:func:`bwdesign.identify.load_data` or
+        :meth:`IdentificationData.from_arrays`); t in s, u in V, y in µm. Several
+        records (any amplitudes, frequencies and sample rates) are fitted together:
+        one parameter set, a sensor offset and an initial state per record
+        (``result.records``); the first record is the reference one (its offset,
+        initial state and sample time are the result's top-level ones).
+    validation : IdentificationData or sequence of them, optional
+        Held-out record(s), any sample rate: the fit percent on them is reported
+        (each one's offset and initial state re-estimated with the parameters held).
     init : str or BoucWenParams, optional
         Preset name, stage TOML or parameters to start from (and the prior for
         a resonance the data do not determine). Without it the start is derived
@@ -303,31 +334,44 @@ def identify(
         without meeting its tolerances or the result is not finite.
     """
     say = progress or (lambda _msg: None)
-    if not isinstance(data, IdentificationData):
-        raise InputError("data must be an IdentificationData (use bwdesign.identify.load_data)")
-    if validation is not None and not isinstance(validation, IdentificationData):
-        raise InputError("validation must be an IdentificationData")
-    if validation is not None and abs(validation.dt - data.dt) > 1e-3 * data.dt:
-        raise InputError(
-            f"validation record is sampled at {validation.dt:.6g} s, the training record at "
-            f"{data.dt:.6g} s: they must share the sample time"
-        )
+    records = _records(data, "data")
+    valids = _records(validation, "validation") if validation is not None else []
     multistart = integer(multistart, "multistart", within=MULTISTART)
     tic = time.perf_counter()
     prior = _resolve_init(init)
-    free = _free_mask(fixed, prior)
-    say(f"identify: {data.n} samples at dt = {data.dt:.6g} s; deriving a start from the data")
-    start, sign, cost0 = _start(data, prior, free)
-    say(f"  start cost {cost0:.6g}")
-    prob = Problem(data.u, data.y, data.dt, sign)
-    theta, sol, nfev = _multistart(
-        prob, start, free, multistart=multistart, seed=seed, max_nfev=max_nfev, say=say
+    say(
+        "identify: "
+        + "; ".join(f"{r.n} samples at dt = {r.dt:.6g} s" for r in records)
+        + "; deriving a start from the data"
     )
-    fit = _Fit(prob, theta, sol, free, nfev)
-    delay = _search_delay(fit, data, max_nfev, say)
+    start, sign, cost0, quasi_static = _start(records, prior, _free_mask(fixed, prior))
+    say(
+        f"  start cost {cost0:.6g}"
+        + (
+            "; quasi-static first (the input has no power near the resonance)"
+            if quasi_static
+            else ""
+        )
+    )
+    prob = Stack.build(records, sign)
+    free = prob.expand(_free_mask(fixed, prior))
+    fit_free = free.copy()
+    fit_free[IW] = free[IW] and not quasi_static
+    theta, sol, nfev = _multistart(
+        prob, start, fit_free, multistart=multistart, seed=seed, max_nfev=max_nfev, say=say
+    )
+    fit = _Fit(prob, theta, sol, fit_free, nfev)
+    if free[IW] and not fit_free[IW] and _resonance_matters(fit, say):
+        # the record does see the dynamics: free the resonance (before any delay,
+        # which could otherwise stand in for the resonance's phase lag)
+        _free_resonance(fit, records, free, max_nfev)
+    delay = _search_delay(fit, records, max_nfev, say)
     resonance_held, alternatives = None, []
-    if fit.free[IW]:
-        resonance_held, alternatives = _resonance(fit, data, prior, max_nfev, say)
+    if free[IW] and not fit.free[IW]:
+        resonance_held = _hold_quasi_static(fit, records, prior, max_nfev, say)
+        alternatives = _profile(fit, max_nfev, say)
+    elif free[IW]:
+        resonance_held, alternatives = _resonance(fit, records, prior, max_nfev, say)
     # intervals with the resonance free even when it is held: they must not pretend
     # that a resonance the record cannot see is known
     cov_free = fit.free.copy()
@@ -343,61 +387,136 @@ def identify(
         n_starts=multistart,
         seconds=time.perf_counter() - tic,
     )
-    return build_result(fit.prob, outcome, data=data, validation=validation, name=name)
+    return build_result(fit.prob, outcome, data=records, validation=valids, name=name)
+
+
+def _records(data: Any, what: str) -> list[IdentificationData]:
+    """One record or a non-empty sequence of them, as a list."""
+    if isinstance(data, IdentificationData):
+        return [data]
+    items = list(data) if isinstance(data, list | tuple) else None
+    if not items or not all(isinstance(r, IdentificationData) for r in items):
+        raise InputError(
+            f"{what} must be an IdentificationData or a non-empty list of them (use "
+            "bwdesign.identify.load_data)"
+        )
+    return items
 
 
 @dataclass
 class _Fit:
     """The search so far: the problem (input delay), the optimum, what is free, the cost."""
 
-    prob: Problem
+    prob: Stack
     theta: np.ndarray
     sol: Any
     free: np.ndarray
     nfev: int
 
 
-def _search_delay(fit: _Fit, data: IdentificationData, max_nfev: int, say) -> int:
-    """The input delay (samples) that earns its place; ``fit`` moves to it."""
+def _search_delay(fit: _Fit, records: list[IdentificationData], max_nfev: int, say) -> int:
+    """The input delay (samples, the same for every record) that earns its place; ``fit``
+    moves to it."""
     delay = 0
     for d in _DELAYS[1:]:
         # a delay must earn its place: a likelihood-ratio gain above chi2(1, 0.999)
-        trial = Problem(delayed_input(data.u, d), data.y, data.dt, fit.prob.sign)
+        trial = Stack.build(records, fit.prob.sign, delay=d)
         th_d, sol_d = _refine(trial, fit.theta, fit.free, max_nfev)
         fit.nfev += sol_d.nfev
-        if not data.n * math.log(fit.sol.cost / max(sol_d.cost, 1e-300)) > _LR_DELAY:
+        if not trial.n * math.log(fit.sol.cost / max(sol_d.cost, 1e-300)) > _LR_DELAY:
             break
         say(f"  input delay {d} sample(s): cost {2 * sol_d.cost:.6g}")
         delay, fit.theta, fit.sol, fit.prob = d, th_d, sol_d, trial
     return delay
 
 
+def _free_resonance(fit: _Fit, records: list[IdentificationData], free: np.ndarray, max_nfev: int):
+    """Refit with the resonance free: from the quasi-static optimum and from a grid
+    over resonance and damping at its hysteresis shape; the lower misfit wins."""
+    window = Stack.build(records, fit.prob.sign, window=START_SAMPLES)
+    th = _grid_linear(window, fit.theta, free)[1]
+    th = _grid_hysteresis(window, th, free)[1]
+    best = None
+    for th0 in (fit.theta, th):
+        th_k, sol_k = _refine(fit.prob, th0, free, max_nfev)
+        fit.nfev += sol_k.nfev
+        if best is None or (sol_k.status > 0, -sol_k.cost) > (best[1].status > 0, -best[1].cost):
+            best = (th_k, sol_k)
+    fit.free = free.copy()
+    fit.theta, fit.sol = best
+
+
+def _resonance_matters(fit: _Fit, say) -> bool:
+    """Score test at the quasi-static optimum: would a free resonance lower the misfit?
+
+    The Gauss-Newton decrease from freeing it, in noise variances, against
+    chi-square(1, 0.999) (the threshold a delay must also pass).
+    """
+    free = fit.free.copy()
+    free[IW] = True
+    free[fit.prob.i_off] = False
+    r = fit.prob.centre(fit.prob.residual(fit.theta))
+    jac = fit.prob.centre(fit.prob.jacobian(fit.theta, free))
+    u, s, _ = np.linalg.svd(jac, full_matrices=False)
+    ok = s > s[0] * 1e-10
+    decrease = float(np.sum((u[:, ok].T @ r) ** 2))
+    s2 = float(r @ r) / max(1, r.size - int(free.sum()) - fit.prob.n_records)
+    stat = decrease / s2
+    say(f"  score test for a free resonance: {stat:.3g} noise variances (threshold {_LR_DELAY:g})")
+    return stat > _LR_DELAY
+
+
+def _hold_quasi_static(
+    fit: _Fit, records: list[IdentificationData], prior: BoucWenParams | None, max_nfev: int, say
+) -> tuple[str, float, float, float]:
+    """Hold the resonance of a quasi-static fit at init's or the stated default."""
+    theta = fit.theta
+    if prior is not None:
+        src, wn_hold = "init", math.sqrt(prior.a1)
+    else:
+        src, wn_hold = "default", max(math.pi / fit.prob.dt, 2.0 / math.exp(theta[ITAU]))
+    if abs(math.log(wn_hold) - theta[IW]) > 1e-12:
+        theta = theta.copy()
+        theta[IW] = math.log(wn_hold)
+        fit.theta, fit.sol = _refine(fit.prob, theta, fit.free, max_nfev)
+        fit.nfev += fit.sol.nfev
+    cov_free = fit.free.copy()
+    cov_free[IW] = True
+    rel = _rel_halfwidth(fit.prob, fit.theta, cov_free, IW)
+    f_r = wn_hold / (2 * math.pi)
+    band = _band(records, f_r / 3.0, 3.0 * f_r)
+    say(
+        f"  the resonance is not determined by these data (input power within a factor 3 "
+        f"of {f_r:.4g} Hz: {band:.3g} of the total); holding it there"
+    )
+    return src, wn_hold, rel, band
+
+
 def _resonance(
-    fit: _Fit, data: IdentificationData, prior: BoucWenParams | None, max_nfev: int, say
+    fit: _Fit, records: list[IdentificationData], prior: BoucWenParams | None, max_nfev: int, say
 ) -> tuple[tuple[str, float, float, float] | None, list[np.ndarray]]:
-    """Whether the record determines the resonance; if not, hold it and profile it.
+    """Whether the record determines a freely fitted resonance; if not, hold and profile it.
 
     Returns ``(resonance_held, alternatives)``: ``(source, wn, rel, band)`` of a held
     resonance (``fit`` refitted with it held unless the record's own curvature placed
     it) and the other resonances that fit the record as well (they widen the intervals).
     """
     theta, prob = fit.theta, fit.prob
-    alternatives: list[np.ndarray] = []
     rel = _rel_halfwidth(prob, theta, fit.free, IW)
     f_r = math.exp(theta[IW]) / (2 * math.pi)
-    band = _band_fraction(data.u, data.dt, f_r / 3.0, 3.0 * f_r)
+    band = _band(records, f_r / 3.0, 3.0 * f_r)
     say(f"  resonance {f_r:.4g} Hz: input power within [f/3, 3f]: {band:.3g} of the total")
     if rel < DETERMINED_REL and band >= MIN_BAND_FRACTION:
-        return None, alternatives
+        return None, []
     tau = math.exp(theta[ITAU])
     if prior is not None:
         src, wn_hold = "init", math.sqrt(prior.a1)
-    elif rel < DETERMINED_REL and f_r < 0.5 / data.dt:
+    elif rel < DETERMINED_REL and f_r < 0.5 / prob.dt:
         # the low-frequency curvature placed it inside the record's band: a
         # guess worth keeping, but not a determination
         src, wn_hold = "curvature", math.exp(theta[IW])
     else:
-        src, wn_hold = "default", max(math.pi / data.dt, 2.0 / tau)
+        src, wn_hold = "default", max(math.pi / prob.dt, 2.0 / tau)
     say(
         f"  the resonance is not determined by these data (95 % half-width "
         f"{100 * rel:.3g} % of sqrt(a1)); holding it at {wn_hold / (2 * math.pi):.4g} Hz"
@@ -409,19 +528,29 @@ def _resonance(
         theta[IW] = math.log(wn_hold)
         fit.theta, fit.sol = _refine(prob, theta, fit.free, max_nfev)
         fit.nfev += fit.sol.nfev
-    # profile: other resonances that fit the record as well widen the intervals
+    return (src, wn_hold, rel, band), _profile(fit, max_nfev, say)
+
+
+def _profile(fit: _Fit, max_nfev: int, say) -> list[np.ndarray]:
+    """Other resonances that fit the record as well (they widen the intervals)."""
+    alternatives: list[np.ndarray] = []
     held = fit.free.copy()
     held[IW] = False
-    s2 = 2.0 * fit.sol.cost / max(1, data.n - int(held.sum()))
+    s2 = 2.0 * fit.sol.cost / max(1, fit.prob.n - int(held.sum()))
     for factor in _PROFILE_FACTORS:
         th_k = fit.theta.copy()
         th_k[IW] += math.log(factor)
-        th_k, sol_k = _refine(prob, th_k, held, max_nfev)
+        th_k, sol_k = solve(fit.prob, th_k, held, _bounds(th_k), max_nfev=max_nfev, step_tol=0.3)
         fit.nfev += sol_k.nfev
         if 2.0 * (sol_k.cost - fit.sol.cost) <= _CHI2_95 * s2:
             alternatives.append(th_k)
     say(f"  {len(alternatives)} other resonance(s) fit as well: intervals widened")
-    return (src, wn_hold, rel, band), alternatives
+    return alternatives
+
+
+def _band(records: list[IdentificationData], f_lo: float, f_hi: float) -> float:
+    """The largest share of a record's input power within ``[f_lo, f_hi]`` Hz."""
+    return max(_band_fraction(r.u, r.dt, f_lo, f_hi) for r in records)
 
 
 def _band_fraction(u: np.ndarray, dt: float, f_lo: float, f_hi: float) -> float:
@@ -436,7 +565,7 @@ def _band_fraction(u: np.ndarray, dt: float, f_lo: float, f_hi: float) -> float:
     return float(power[(f >= f_lo) & (f <= f_hi)].sum() / total)
 
 
-def _rel_halfwidth(prob: Problem, theta: np.ndarray, free: np.ndarray, index: int) -> float:
+def _rel_halfwidth(prob: Stack, theta: np.ndarray, free: np.ndarray, index: int) -> float:
     """95 % half-width of exp(theta[index]) relative to its value (white-noise estimate)."""
     jac = prob.jacobian(theta, free)
     r = prob.residual(theta)

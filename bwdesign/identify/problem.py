@@ -29,7 +29,13 @@ import math
 import numpy as np
 
 from ..model.params import A3_MAGNITUDE, PARAM_RANGES, BoucWenParams
-from .simulate import hysteresis_path, linear_matrices, linear_response
+from .simulate import (
+    Segments,
+    hysteresis_path,
+    hysteresis_sensitivity,
+    linear_matrices,
+    linear_response,
+)
 
 __all__ = ["FIT_NAMES", "Problem", "params_from_theta", "theta_from_params"]
 
@@ -111,16 +117,23 @@ class Problem:
         Sample time (s).
     sign : float
         Sign of the static gain.
+    y_scale : float, optional
+        Output scale of the residual (default: the standard deviation of ``y``;
+        records fitted together share one, :class:`bwdesign.identify.stack.Stack`).
     """
 
-    def __init__(self, u: np.ndarray, y: np.ndarray, dt: float, sign: float):
+    def __init__(
+        self, u: np.ndarray, y: np.ndarray, dt: float, sign: float, *, y_scale: float | None = None
+    ):
         self.u = np.ascontiguousarray(u, dtype=float)
         self.y = np.ascontiguousarray(y, dtype=float)
         self.dt = float(dt)
         self.sign = float(sign)
         self.y_mean = float(np.mean(y))
-        self.y_scale = float(np.std(y)) or 1.0
+        self.y_scale = float(y_scale) if y_scale is not None else (float(np.std(y)) or 1.0)
+        self.segments = Segments(self.u)
         self._cache: dict[tuple[float, float, float], np.ndarray] = {}
+        self._sens: tuple[tuple[float, float, float], np.ndarray, np.ndarray] | None = None
         self.n_loops = 0
 
     # -- model --------------------------------------------------------------
@@ -131,7 +144,9 @@ class Problem:
         if h is None:
             beta = math.exp(key[0])
             gamma = beta * math.tanh(key[1])
-            h = hysteresis_path(self.u, key[2] / (beta + gamma), 1.0, beta, gamma)
+            h = hysteresis_path(
+                self.u, key[2] / (beta + gamma), 1.0, beta, gamma, segments=self.segments
+            )
             self.n_loops += 1
             if len(self._cache) >= 16:
                 self._cache.pop(next(iter(self._cache)))
@@ -151,24 +166,62 @@ class Problem:
         """Scaled residual ``(model - measured) / y_scale``."""
         return (self.predict(theta) - self.y) / self.y_scale
 
-    def jacobian(self, theta: np.ndarray, free: np.ndarray, *, central: bool = False) -> np.ndarray:
-        """Finite-difference Jacobian of :meth:`residual` in the ``free`` coordinates.
+    def unit_sensitivity(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit hysteresis path and its derivatives in (log_beta, shape, h0), exactly."""
+        key = (float(theta[IB]), float(theta[IQ]), float(theta[IZ]))
+        if self._sens is not None and self._sens[0] == key:
+            return self._sens[1], self._sens[2]
+        beta = math.exp(key[0])
+        t = math.tanh(key[1])
+        cp, cm = beta * (1.0 + t), beta * (1.0 - t)
+        h0 = key[2] / cp
+        h, d = hysteresis_sensitivity(self.segments, h0, 1.0, beta, beta * t)
+        self.n_loops += 1
+        sech2 = 1.0 - t * t
+        # h0 = z / cp: the derivatives reach h through cp as well as through h0
+        out = np.empty_like(d)
+        out[:, 0] = d[:, 0] * cp + d[:, 1] * cm - d[:, 2] * h0
+        out[:, 1] = beta * sech2 * (d[:, 0] - d[:, 1] - d[:, 2] * h0 / cp)
+        out[:, 2] = d[:, 2] / cp
+        self._sens = (key, h, out)
+        return h, out
 
-        Only steps in beta, q and h0 rerun the hysteresis loop; the others reuse it.
+    def jacobian(self, theta: np.ndarray, free: np.ndarray, *, central: bool = False) -> np.ndarray:
+        """Jacobian of :meth:`residual` in the ``free`` coordinates.
+
+        Exact for gain, alpha, the hysteresis shape (forward-mode sensitivities along
+        the input's runs, :func:`bwdesign.identify.simulate.hysteresis_sensitivity`),
+        offset and initial state: one pass and one batched filter call. The lag and
+        the resonance change only the linear filter: central differences of the
+        filter alone (no hysteresis rerun). ``central`` is accepted for compatibility.
         """
-        step = 1e-6 if not central else 1e-5
-        r0 = None if central else self.residual(theta)
-        cols = []
-        for i in np.flatnonzero(free):
-            tp = theta.copy()
-            tp[i] += step
-            if central:
-                tm = theta.copy()
+        del central
+        n = self.u.size
+        wn = math.exp(theta[IW])
+        phi, b = linear_matrices(wn * wn, math.exp(theta[ITAU]) * wn * wn, self.dt)
+        k = self.sign * math.exp(theta[IK])
+        alpha = math.exp(theta[IA])
+        h, dh = self.unit_sensitivity(theta)
+        cols = np.zeros((n, 10))
+        drive = np.column_stack([k * self.u, -alpha * h, -alpha * dh, np.zeros((n, 2))])
+        x0 = np.zeros((2, 7))
+        x0[0, :5] = drive[0, :5]
+        x0[0, 5], x0[1, 6] = 1.0, wn
+        resp = linear_response(phi, b, drive, x0)
+        cols[:, IK], cols[:, IA] = resp[:, 0], resp[:, 1]
+        cols[:, IB], cols[:, IQ], cols[:, IZ] = resp[:, 2], resp[:, 3], resp[:, 4]
+        cols[:, IE1], cols[:, IE2] = resp[:, 5], resp[:, 6]
+        cols[:, :IOFF] /= self.y_scale
+        cols[:, IZ] /= self.y_scale
+        cols[:, IOFF] = 1.0
+        for i in (ITAU, IW):
+            if free[i]:
+                step = 1e-5
+                tp, tm = theta.copy(), theta.copy()
+                tp[i] += step
                 tm[i] -= step
-                cols.append((self.residual(tp) - self.residual(tm)) / (2 * step))
-            else:
-                cols.append((self.residual(tp) - r0) / step)
-        return np.column_stack(cols)
+                cols[:, i] = (self.predict(tp) - self.predict(tm)) / (2 * step * self.y_scale)
+        return cols[:, free]
 
     # -- linear sub-problem (variable projection, for start values) ----------
     def linear_basis(self, theta: np.ndarray, h_unit: np.ndarray) -> np.ndarray:
@@ -176,15 +229,10 @@ class Problem:
         wn = math.exp(theta[IW])
         phi, b = linear_matrices(wn * wn, math.exp(theta[ITAU]) * wn * wn, self.dt)
         zero = np.zeros_like(self.u)
-        return np.column_stack(
-            [
-                self.sign * linear_response(phi, b, self.u, np.array([self.u[0], 0.0])),
-                -linear_response(phi, b, h_unit, np.array([h_unit[0], 0.0])),
-                np.ones_like(self.u),
-                linear_response(phi, b, zero, np.array([1.0, 0.0])),
-                linear_response(phi, b, zero, np.array([0.0, wn])),
-            ]
-        )
+        drive = np.column_stack([self.sign * self.u, -h_unit, zero, zero])
+        x0 = np.array([[self.sign * self.u[0], -h_unit[0], 1.0, 0.0], [0.0, 0.0, 0.0, wn]])
+        resp = linear_response(phi, b, drive, x0)
+        return np.column_stack([resp[:, :2], np.ones_like(self.u), resp[:, 2:]])
 
     def project(
         self, theta: np.ndarray, h_unit: np.ndarray | None = None

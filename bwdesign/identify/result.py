@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..model.params import BoucWenParams
 from ..model.uncertainty import UncertaintyBox
@@ -43,6 +42,7 @@ from .problem import (
     delayed_input,
     params_from_theta,
 )
+from .stack import Stack
 
 __all__ = ["IdentificationResult", "fit_percent"]
 
@@ -78,23 +78,35 @@ class IdentificationResult:
         a3/a1 (µm/V), ``lag`` a2/a1 (s), ``natural_frequency`` sqrt(a1)/2pi (Hz),
         ``damping_ratio``; each ``{"value", "std_err"}``.
     fit_percent : dict
-        ``train`` and ``validation`` (None without a validation record) (%).
+        ``train`` and ``validation`` (None without a validation record) (%);
+        over several records, ``100 (1 - ||y - y_model|| / ||y - mean||)`` with
+        every sample of every record and each record's own mean.
     residual_rms : float
-        Training residual RMS (µm).
+        Training residual RMS (µm), over all training records.
     residual_rms_validation : float or None
         Validation residual RMS (µm).
     offset : float
-        Estimated sensor offset (µm), with ``offset_std_err``.
+        Estimated sensor offset (µm) of the (first) training record, with
+        ``offset_std_err``.
     initial_state : tuple of 3 floats
-        Estimated (x1, x2, x3) at the first sample (µm, µm/s, µm).
+        Estimated (x1, x2, x3) at the (first) record's first sample (µm, µm/s, µm).
     delay_samples : int
         Integer input delay the record needed (0 when none); not part of the
         stage model, applied before fitting.
+    dt, n_samples : float, int
+        The (first) training record's sample time (s); samples fitted (all records).
     diagnostics : tuple of str
         Plain-language notes, one per poorly determined parameter or problem.
     converged : bool
     reason : str
         Why the optimiser stopped.
+    records : tuple of dict
+        Per training record: ``source``, ``n_samples``, ``dt``, ``fit_percent``,
+        ``residual_rms``, ``offset``, ``offset_std_err`` and ``initial_state``
+        (one entry for a single record).
+    validation_records : tuple of dict
+        Per validation record: ``source``, ``n_samples``, ``dt``, ``fit_percent``,
+        ``residual_rms``.
     """
 
     params: BoucWenParams
@@ -120,6 +132,8 @@ class IdentificationResult:
     n_starts: int
     seconds: float
     level: float = 0.95
+    records: tuple[dict[str, Any], ...] = ()
+    validation_records: tuple[dict[str, Any], ...] = ()
     traces: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def to_uncertainty(self) -> UncertaintyBox:
@@ -136,9 +150,13 @@ class IdentificationResult:
         return UncertaintyBox(widths=widths, source="identified", level=self.level)
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready document (non-finite numbers stay floats; the JSON layer maps them)."""
+        """A JSON-ready document (non-finite numbers stay floats; the JSON layer maps them).
+
+        ``records`` and ``validation_records`` (per-record fit, offset, initial state)
+        appear when several records were given.
+        """
         corr = [[float(v) for v in row] for row in self.correlation]
-        return {
+        doc = {
             "params": {n: getattr(self.params, n) for n in NAMES},
             "ci95": {n: [float(lo), float(hi)] for n, (lo, hi) in self.ci95.items()},
             "std_err": dict(self.std_err),
@@ -163,6 +181,10 @@ class IdentificationResult:
             "seconds": self.seconds,
             "level": self.level,
         }
+        if len(self.records) > 1 or len(self.validation_records) > 1:
+            doc["records"] = [dict(r) for r in self.records]
+            doc["validation_records"] = [dict(r) for r in self.validation_records]
+        return doc
 
 
 # -- covariance -----------------------------------------------------------------
@@ -180,25 +202,34 @@ def _hac_lag(r: np.ndarray) -> int:
     return int(min(max(lag, rule), max(1, n // 20), 400))
 
 
-def _covariance(jac: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, int]:
-    """Newey-West sandwich covariance of the free coordinates, and its lag.
+def _covariance(
+    jac: np.ndarray, r: np.ndarray, blocks: list[slice] | None = None
+) -> tuple[np.ndarray, int]:
+    """Newey-West sandwich covariance of the free coordinates, and its (largest) lag.
 
     Directions of the Jacobian with a singular value below 1e-8 of the largest
     are not determined: every coordinate with weight in them gets an infinite
-    variance (and the rest is computed on the determined subspace).
+    variance (and the rest is computed on the determined subspace). ``blocks``:
+    the rows of each record (independent records: the Newey-West sum runs within
+    each, at its own lag).
     """
     n, p = jac.shape
     _, s, vt = np.linalg.svd(jac, full_matrices=False)
     ok = s > s[0] * 1e-8 if s[0] > 0 else np.zeros_like(s, dtype=bool)
     inv = np.where(ok, 1.0 / np.where(ok, s, 1.0) ** 2, 0.0)
     bread = (vt.T * inv) @ vt
-    g = jac * r[:, None]
-    lag = _hac_lag(r)
-    meat = g.T @ g
-    for ell in range(1, lag + 1):
-        w = 1.0 - ell / (lag + 1.0)
-        gam = g[ell:].T @ g[:-ell]
-        meat += w * (gam + gam.T)
+    g_all = jac * r[:, None]
+    meat = g_all.T @ g_all
+    lags = []
+    for b in blocks or [slice(0, n)]:
+        g = g_all[b]
+        lag = _hac_lag(r[b])
+        lags.append(lag)
+        for ell in range(1, lag + 1):
+            w = 1.0 - ell / (lag + 1.0)
+            gam = g[ell:].T @ g[:-ell]
+            meat += w * (gam + gam.T)
+    lag = max(lags)
     cov = bread @ meat @ bread * (n / max(1, n - p))
     # never narrower than the white-noise s^2 (J^T J)^-1 (Newey-West is biased low
     # in finite samples): per coordinate the larger variance, Newey-West correlation
@@ -218,7 +249,7 @@ def _covariance(jac: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def _natural_jacobian(theta: np.ndarray, p: BoucWenParams) -> np.ndarray:
-    t = np.zeros((6, 10))
+    t = np.zeros((6, theta.size))
     t[0, IW] = 2 * p.a1
     t[1, ITAU], t[1, IW] = p.a2, 2 * p.a2
     t[2, IK], t[2, IW] = p.a3, 2 * p.a3
@@ -246,7 +277,7 @@ def _monotone_runs(u: np.ndarray) -> tuple[int, float]:
 def _diagnose(
     *,
     p: BoucWenParams,
-    u: np.ndarray,
+    u: list[np.ndarray],
     dt: float,
     rel: dict[str, float],
     corr: np.ndarray,
@@ -287,7 +318,8 @@ def _diagnose(
                 "a sample rate several times above it, or give the stage's a1 with --init."
             )
         )
-    n_rev, travel = _monotone_runs(u)
+    runs = [_monotone_runs(uk) for uk in u]
+    n_rev, travel = sum(n for n, _ in runs), max(w for _, w in runs)
     sat = 1.0 / (p.beta + p.gamma)
     if not (rel["beta"] < _DETERMINED_REL and rel["gamma"] < _DETERMINED_REL):
         if n_rev == 0:
@@ -362,32 +394,21 @@ def _pct(rel: float) -> str:
 
 def _validate(prob: Problem, theta: np.ndarray) -> tuple[np.ndarray, float]:
     """Re-estimate offset and initial state on a validation record, parameters held."""
+    from .solve import solve
+
     free = np.zeros(10, dtype=bool)
     free[[IOFF, IZ, IE1, IE2]] = True
     cost, th = prob.project(theta)
     th[[IK, IA]] = theta[[IK, IA]]
-    lo = np.array([-np.inf, -5.0, -np.inf, -np.inf])
-    hi = np.array([np.inf, 5.0, np.inf, np.inf])
+    lo, hi = np.full(10, -np.inf), np.full(10, np.inf)
+    lo[IZ], hi[IZ] = -5.0, 5.0
     best = None
     for z in (-0.8, 0.0, 0.8):
         th0 = th.copy()
         th0[IZ] = z
-
-        def full(x: np.ndarray, th0: np.ndarray = th0) -> np.ndarray:
-            t = th0.copy()
-            t[free] = x
-            return t
-
-        sol = least_squares(
-            lambda x, full=full: prob.residual(full(x)),
-            th0[free],
-            jac=lambda x, full=full: prob.jacobian(full(x), free),
-            bounds=(lo, hi),
-            method="trf",
-            max_nfev=50,
-        )
+        th_z, sol = solve(prob, th0, free, (lo, hi), max_nfev=50)
         if best is None or sol.cost < best[1]:
-            best = (full(sol.x), sol.cost)
+            best = (th_z, sol.cost)
     pred = prob.predict(best[0])
     return pred, fit_percent(prob.y, pred)
 
@@ -427,41 +448,100 @@ class FitOutcome:
     seconds: float
 
 
+def _pooled_fit(ys: list[np.ndarray], models: list[np.ndarray]) -> float:
+    """Fit percent over several records, each about its own mean (one record: fit_percent)."""
+    if len(ys) == 1:
+        return fit_percent(ys[0], models[0])
+    num = sum(float(np.sum((y - m) ** 2)) for y, m in zip(ys, models, strict=True))
+    den = sum(float(np.sum((y - np.mean(y)) ** 2)) for y in ys)
+    return float(100.0 * (1.0 - math.sqrt(num / den)))
+
+
+def _rms(ys: list[np.ndarray], models: list[np.ndarray]) -> float:
+    res = np.concatenate([m - y for y, m in zip(ys, models, strict=True)])
+    return float(np.sqrt(np.mean(res**2)))
+
+
+def _summary(rec: Any, y_model: np.ndarray) -> dict[str, Any]:
+    return {
+        "source": rec.source,
+        "n_samples": rec.n,
+        "dt": rec.dt,
+        "fit_percent": fit_percent(rec.y, y_model),
+        "residual_rms": _rms([rec.y], [y_model]),
+    }
+
+
+def _train_records(
+    prob: Stack, theta: np.ndarray, p: BoucWenParams, sd: np.ndarray, data: list, models: list
+) -> list[dict[str, Any]]:
+    """Per training record: fit, offset (and its standard error) and initial state."""
+    out = []
+    wn = math.sqrt(p.a1)
+    for k, (pk, rec) in enumerate(zip(prob.problems, data, strict=True)):
+        th = prob.local(theta, k)
+        h0 = float(th[IZ] * p.alpha / (p.beta + p.gamma))
+        w0 = p.static_gain * float(pk.u[0]) - h0
+        x0 = (w0 + pk.y_scale * float(th[IE1]), pk.y_scale * wn * float(th[IE2]), h0)
+        i_off = IOFF if prob.n_records == 1 else int(prob.i_off[k])
+        out.append(
+            _summary(rec, models[k])
+            | {
+                "offset": pk.y_mean + pk.y_scale * float(th[IOFF]),
+                "offset_std_err": pk.y_scale * float(sd[i_off]),
+                "initial_state": x0,
+            }
+        )
+    return out
+
+
+def _validation(
+    validation: list, prob: Stack, theta: np.ndarray, delay: int, traces: dict
+) -> tuple[list[np.ndarray], list[dict[str, Any]]]:
+    """Each validation record's model output (offset and initial state re-estimated)."""
+    models, summaries = [], []
+    for j, rec in enumerate(validation):
+        vprob = Problem(delayed_input(rec.u, delay), rec.y, rec.dt, prob.sign)
+        v_model, _ = _validate(vprob, prob.local(theta, 0))
+        models.append(v_model)
+        summaries.append(_summary(rec, v_model))
+        pre = "val_" if j == 0 else f"val{j + 1}_"
+        traces.update({pre + "t": rec.t, pre + "u": rec.u, pre + "y": rec.y})
+        traces[pre + "y_model"] = v_model
+    return models, summaries
+
+
 def build_result(
-    prob: Problem, fit: FitOutcome, *, data: Any, validation: Any, name: str
+    prob: Stack, fit: FitOutcome, *, data: list, validation: list, name: str
 ) -> IdentificationResult:
-    """Covariance, intervals, fit quality and diagnostics at the optimum ``fit.theta``."""
+    """Covariance, intervals, fit quality and diagnostics at the optimum ``fit.theta``.
+
+    ``data``, ``validation``: the training and validation records (lists).
+    """
     theta, sol, delay = fit.theta, fit.sol, fit.delay
     p = params_from_theta(theta, prob.sign, name)
     r = prob.residual(theta)
     alt = [params_from_theta(th, prob.sign) for th in fit.alternatives]
     unc = _uncertainty(prob, fit, p, r, alt)
-    y_model = prob.predict(theta)
-    res_um = y_model - prob.y
-    fit_train = fit_percent(prob.y, y_model)
-    rc = r - r.mean()
+    models = prob.predict_each(theta)
+    ys = [pk.y for pk in prob.problems]
+    fit_train = _pooled_fit(ys, models)
+    rc = prob.centre(r)
     energy = float(rc @ rc)
     lags = range(1, min(51, rc.size))
     acf = np.array([rc[k:] @ rc[:-k] for k in lags]) / energy if energy > 0 else np.zeros(1)
     whiteness = (float(acf[0]), float(np.mean(np.abs(acf) > 2.0 / math.sqrt(rc.size))))
-    traces = {"t": data.t, "u": data.u, "y": data.y, "y_model": y_model}
-    fit_val = rms_val = None
-    if validation is not None:
-        vprob = Problem(delayed_input(validation.u, delay), validation.y, validation.dt, prob.sign)
-        v_model, fit_val = _validate(vprob, theta)
-        rms_val = float(np.sqrt(np.mean((v_model - validation.y) ** 2)))
-        traces.update(
-            {
-                "val_t": validation.t,
-                "val_u": validation.u,
-                "val_y": validation.y,
-                "val_y_model": v_model,
-            }
-        )
+    traces = {}
+    for k, rec in enumerate(data):
+        pre = "" if k == 0 else f"r{k + 1}_"
+        traces.update({pre + "t": rec.t, pre + "u": rec.u, pre + "y": rec.y})
+        traces[pre + "y_model"] = models[k]
+    v_models, v_summaries = _validation(validation, prob, theta, delay, traces)
+    v_ys = [rec.y for rec in validation]
     notes = _diagnose(
         p=p,
-        u=data.u,
-        dt=data.dt,
+        u=[rec.u for rec in data],
+        dt=prob.dt,
         rel=unc.rel,
         corr=unc.corr,
         derived=unc.derived,
@@ -474,10 +554,7 @@ def build_result(
     if fit.alternatives:
         notes.append(_widened_note(alt, unc.widened))
     converged, reason = _convergence(sol, unc.values)
-    wn = math.sqrt(p.a1)
-    h0 = float(theta[IZ] * p.alpha / (p.beta + p.gamma))
-    w0 = p.static_gain * float(prob.u[0]) - h0
-    x0 = (w0 + prob.y_scale * float(theta[IE1]), prob.y_scale * wn * float(theta[IE2]), h0)
+    records = _train_records(prob, theta, p, unc.sd, data, models)
     return IdentificationResult(
         params=p,
         std_err=unc.se,
@@ -485,15 +562,18 @@ def build_result(
         correlation=unc.corr,
         determined=unc.determined,
         derived=unc.derived,
-        fit_percent={"train": fit_train, "validation": fit_val},
-        residual_rms=float(np.sqrt(np.mean(res_um**2))),
-        residual_rms_validation=rms_val,
-        offset=prob.y_mean + prob.y_scale * float(theta[IOFF]),
-        offset_std_err=prob.y_scale * float(unc.sd[IOFF]),
-        initial_state=x0,
+        fit_percent={
+            "train": fit_train,
+            "validation": _pooled_fit(v_ys, v_models) if validation else None,
+        },
+        residual_rms=_rms(ys, models),
+        residual_rms_validation=_rms(v_ys, v_models) if validation else None,
+        offset=records[0]["offset"],
+        offset_std_err=records[0]["offset_std_err"],
+        initial_state=records[0]["initial_state"],
         delay_samples=delay,
-        dt=data.dt,
-        n_samples=data.n,
+        dt=data[0].dt,
+        n_samples=prob.n,
         diagnostics=tuple(notes),
         converged=converged,
         reason=reason,
@@ -505,6 +585,8 @@ def build_result(
         nfev=fit.nfev,
         n_starts=fit.n_starts,
         seconds=fit.seconds,
+        records=tuple(records),
+        validation_records=tuple(v_summaries),
         traces=traces,
     )
 
@@ -526,13 +608,13 @@ class _Uncertainty:
 
 
 def _uncertainty(
-    prob: Problem, fit: FitOutcome, p: BoucWenParams, r: np.ndarray, alt: list[BoucWenParams]
+    prob: Stack, fit: FitOutcome, p: BoucWenParams, r: np.ndarray, alt: list[BoucWenParams]
 ) -> _Uncertainty:
     """The covariance at the optimum, mapped to a1..gamma and widened by the alternatives."""
     theta, free = fit.theta, fit.free
     jac = prob.jacobian(theta, free, central=True)
-    cov_free, lag = _covariance(jac, r)
-    cov = np.zeros((10, 10))
+    cov_free, lag = _covariance(jac, r, prob.blocks() if prob.n_records > 1 else None)
+    cov = np.zeros((theta.size, theta.size))
     idx = np.flatnonzero(free)
     cov[np.ix_(idx, idx)] = cov_free
     tn = _natural_jacobian(theta, p)
@@ -610,13 +692,14 @@ def _widened_note(alt: list[BoucWenParams], widened: list[str]) -> str:
 
 
 def _convergence(sol: Any, values: dict[str, float]) -> tuple[bool, str]:
-    """``(converged, reason)``: the optimiser met its tolerances and the optimum is finite."""
+    """``(converged, reason)``: the fit met the step test and the optimum is finite."""
     finite = all(math.isfinite(v) for v in values.values()) and math.isfinite(sol.cost)
     converged = bool(sol.status > 0 and finite)
     reason = str(sol.message) if finite else "the optimum is not finite"
-    if sol.status == 0:
-        reason = (
-            f"the optimiser used its {sol.nfev} residual evaluations without meeting its "
-            "tolerances; give a better --init or a richer record"
+    if not converged:
+        reason += (
+            "; what would help: a start closer to the stage (--init), a record with larger "
+            "reversals and content near the resonance (bwdesign excite), or more "
+            "evaluations (--max-nfev)"
         )
     return converged, reason

@@ -2,9 +2,11 @@
 
 The hysteresis state depends on the input path only (Bouc-Wen is rate
 independent), not on ``(x1, x2)``; the linear part is driven by
-``a1 (K u_k - h_k)`` with ``K = a3/a1``. So one simulation is a scalar loop for
-``h`` (:func:`hysteresis_path`, the closed form of
-:func:`bwdesign.model.plant.hysteresis_increment` inlined) and a second-order
+``a1 (K u_k - h_k)`` with ``K = a3/a1``. So one simulation is the hysteresis path
+(:func:`hysteresis_path`: the closed form of
+:func:`bwdesign.model.plant.hysteresis_increment` composed over each monotone run of
+the input, one scalar pass over the runs and one vectorised pass over the samples;
+:func:`hysteresis_sensitivity` adds its exact derivatives) and a second-order
 IIR filter for ``x1`` (:func:`linear_response`, scipy's ``lfilter`` on the
 transfer function of the exact ZOH matrices of
 :func:`bwdesign.model.plant.discretize`, in closed form). A fit changes the linear parameters
@@ -18,15 +20,187 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.signal import lfilter, lfiltic
+from scipy.signal import lfilter
 
 from ..model.params import BoucWenParams
 
-__all__ = ["hysteresis_path", "linear_matrices", "linear_response", "simulate_output"]
+__all__ = [
+    "Segments",
+    "hysteresis_path",
+    "hysteresis_sensitivity",
+    "linear_matrices",
+    "linear_response",
+    "simulate_output",
+]
+
+
+class Segments:
+    """The monotone runs of a held input: the hysteresis recursion per run is closed-form.
+
+    Bouc-Wen is rate independent and, on a run where the input moves one way, its
+    state obeys ``dg/dw = alpha - c g`` in the travel ``w`` (``g = s h``, ``s`` the
+    direction, ``c = beta + gamma`` while ``g >= 0``, ``beta - gamma`` before ``g``
+    crosses zero): the steps of a run compose into one closed form of the travel
+    since its start. Only the runs' end states need a sequential pass (a slow sine
+    has two runs per period); every sample is then evaluated at once.
+    """
+
+    def __init__(self, u: np.ndarray):
+        u = np.asarray(u, dtype=float)
+        du = np.diff(u, prepend=u[0])
+        sgn = np.sign(du)
+        # sign of the last non-zero step at or before each sample (0 before the first)
+        idx = np.maximum.accumulate(np.where(sgn != 0, np.arange(u.size), -1))
+        last = np.where(idx >= 0, sgn[np.maximum(idx, 0)], 0.0)
+        prev = np.concatenate(([0.0], last[:-1]))
+        start = (sgn != 0) & (sgn != prev)
+        start[0] = True
+        self.starts = np.flatnonzero(start)
+        self.seg = np.cumsum(start) - 1
+        travel = np.cumsum(np.abs(du))
+        base = travel[self.starts] - np.abs(du[self.starts])
+        self.w = travel - base[self.seg]
+        ends = np.concatenate((self.starts[1:] - 1, [u.size - 1]))
+        self.w_end = self.w[ends]
+        d = sgn[self.starts]
+        self.s = np.where(d == 0, 1.0, d)
+
+
+def _psi(x):
+    """``-expm1(-x)/x`` (1 at 0) and its derivative, for arrays ``x >= 0``."""
+    small = x < 1e-4
+    xs = np.where(small, 1.0, x)
+    em = np.expm1(-xs)
+    psi = np.where(small, 1.0 - x / 2 + x * x / 6, -em / xs)
+    dpsi = np.where(small, -0.5 + x / 3 - x * x / 8, (xs * (em + 1.0) + em) / (xs * xs))
+    return psi, dpsi
+
+
+def _psi1(x: float) -> tuple[float, float]:
+    if x < 1e-4:
+        return 1.0 - x / 2 + x * x / 6, -0.5 + x / 3 - x * x / 8
+    em = math.expm1(-x)
+    return -em / x, (x * (em + 1.0) + em) / (x * x)
+
+
+def _phi1(y: float) -> tuple[float, float]:
+    """``log1p(y)/y`` (1 at 0) and its derivative."""
+    if y < 1e-4:
+        return 1.0 - y / 2 + y * y / 3, -0.5 + 2 * y / 3 - 0.75 * y * y
+    lp = math.log1p(y)
+    return lp / y, (y / (1.0 + y) - lp) / (y * y)
+
+
+def _run_end(g0, d0, w, cp, cm, alpha):
+    """State (and its sensitivities to cp, cm, h0) after travelling ``w`` along one run."""
+    if g0 < 0.0:
+        m = -g0 / alpha
+        ph, dph = _phi1(cm * m)
+        wz = m * ph
+        if w <= wz:
+            x = cm * w
+            ps, dps = _psi1(x)
+            e = math.exp(-x)
+            g = g0 * e + alpha * w * ps
+            if d0 is None:
+                return g, None
+            fc = -w * g0 * e + alpha * w * w * dps
+            return g, (e * d0[0], e * d0[1] + fc, e * d0[2])
+        v = w - wz
+        ps, dps = _psi1(cp * v)
+        g = alpha * v * ps
+        if d0 is None:
+            return g, None
+        fw = alpha * math.exp(-cp * v)
+        # wz = m phi(cm m), m = -g0/alpha
+        dwz_dg0 = -(ph + cm * m * dph) / alpha
+        dwz_dcm = m * m * dph
+        fc = alpha * v * v * dps
+        return g, (
+            -fw * dwz_dg0 * d0[0] + fc,
+            -fw * (dwz_dg0 * d0[1] + dwz_dcm),
+            -fw * dwz_dg0 * d0[2],
+        )
+    x = cp * w
+    ps, dps = _psi1(x)
+    e = math.exp(-x)
+    g = g0 * e + alpha * w * ps
+    if d0 is None:
+        return g, None
+    fc = -w * g0 * e + alpha * w * w * dps
+    return g, (e * d0[0] + fc, e * d0[1], e * d0[2])
+
+
+def _runs(seg: Segments, h0, cp, cm, alpha, sens):
+    """Start state of every run (and its sensitivities), by one pass over the runs."""
+    n = seg.starts.size
+    g0 = np.empty(n)
+    d0 = np.zeros((n, 3)) if sens else None
+    h, dh = float(h0), ((0.0, 0.0, 1.0) if sens else None)
+    s_list, w_list = seg.s.tolist(), seg.w_end.tolist()
+    for j in range(n):
+        s = s_list[j]
+        g = s * h
+        dg = (s * dh[0], s * dh[1], s * dh[2]) if sens else None
+        g0[j] = g
+        if sens:
+            d0[j] = dg
+        g, dg = _run_end(g, dg, w_list[j], cp, cm, alpha)
+        h = s * g
+        if sens:
+            dh = (s * dg[0], s * dg[1], s * dg[2])
+    return g0, d0
+
+
+def _evaluate(seg: Segments, g0j, d0j, cp, cm, alpha, sens):
+    """``h`` at every sample (and ``dh/d(cp, cm, h0)``) from the runs' start states."""
+    g0 = g0j[seg.seg]
+    s = seg.s[seg.seg]
+    w = seg.w
+    neg = g0 < 0.0
+    m = np.where(neg, -g0 / alpha, 0.0)
+    y = cm * m
+    ys = np.where(y < 1e-4, 1.0, y)
+    lp = np.log1p(ys)
+    ph = np.where(y < 1e-4, 1.0 - y / 2 + y * y / 3, lp / ys)
+    wz = m * ph
+    before = neg & (w <= wz)  # still on the beta - gamma branch
+    cross = neg & ~before
+    c = np.where(before, cm, cp)
+    v = np.where(cross, w - wz, w)
+    gs = np.where(cross, 0.0, g0)
+    x = c * v
+    e = np.exp(-x)
+    psi, dpsi = _psi(x)
+    g = gs * e + alpha * v * psi
+    h = s * g
+    if not sens:
+        return h, None
+    d0 = d0j[seg.seg]
+    fc = -v * gs * e + alpha * v * v * dpsi
+    dph = np.where(y < 1e-4, -0.5 + 2 * y / 3 - 0.75 * y * y, (ys / (1.0 + ys) - lp) / (ys * ys))
+    dwz_dg0 = -(ph + y * dph) / alpha
+    dwz_dcm = m * m * dph
+    fw = alpha * e
+    d = np.empty((w.size, 3))
+    # on a branch: e * d0 plus the branch constant's own term; after the crossing the
+    # state depends on g0 and cm only through the crossing distance wz
+    d[:, 0] = np.where(cross, -fw * dwz_dg0 * d0[:, 0], e * d0[:, 0]) + np.where(before, 0.0, fc)
+    d[:, 1] = np.where(cross, -fw * (dwz_dg0 * d0[:, 1] + dwz_dcm), e * d0[:, 1]) + np.where(
+        before, fc, 0.0
+    )
+    d[:, 2] = np.where(cross, -fw * dwz_dg0 * d0[:, 2], e * d0[:, 2])
+    return h, d * s[:, None]
 
 
 def hysteresis_path(
-    u: np.ndarray, h0: float, alpha: float, beta: float, gamma: float
+    u: np.ndarray,
+    h0: float,
+    alpha: float,
+    beta: float,
+    gamma: float,
+    *,
+    segments: Segments | None = None,
 ) -> np.ndarray:
     """Hysteresis state after the jump at each sample, for a held input sequence.
 
@@ -38,50 +212,31 @@ def hysteresis_path(
         Hysteresis state at ``t_0`` (length unit).
     alpha, beta, gamma : float
         Bouc-Wen parameters with ``beta + gamma > 0`` and ``beta - gamma >= 0``.
+    segments : Segments, optional
+        ``Segments(u)``, when the same input is simulated many times.
 
     Returns
     -------
     ndarray, shape (N,)
         ``h[k]``: the state after the jump from ``u[k-1]`` to ``u[k]``.
     """
-    cp = beta + gamma
-    cm = beta - gamma
-    out = np.empty(len(u))
-    h = float(h0)
-    up = float(u[0])
-    exp, expm1, log1p = math.exp, math.expm1, math.log1p
-    for k, uk in enumerate(u.tolist()):
-        du = uk - up
-        up = uk
-        if du != 0.0:
-            if du > 0.0:
-                s, w, g = 1.0, du, h
-            else:
-                s, w, g = -1.0, -du, -h
-            if g < 0.0:
-                # branch c = beta - gamma until g crosses zero (at a distance wz)
-                if cm == 0.0:
-                    wz = -g / alpha
-                else:
-                    wz = log1p(-cm * g / alpha) / cm
-                if w <= wz:
-                    x = cm * w
-                    if x < 1e-8:
-                        g = g * (1.0 - x) + alpha * w * (1.0 - 0.5 * x)
-                    else:
-                        g = g * exp(-x) - alpha * expm1(-x) / cm
-                    h = s * g
-                    out[k] = h
-                    continue
-                g, w = 0.0, w - wz
-            x = cp * w
-            if x < 1e-8:
-                g = g * (1.0 - x) + alpha * w * (1.0 - 0.5 * x)
-            else:
-                g = g * exp(-x) - alpha * expm1(-x) / cp
-            h = s * g
-        out[k] = h
-    return out
+    seg = segments if segments is not None else Segments(u)
+    cp, cm = beta + gamma, beta - gamma
+    g0, _ = _runs(seg, h0, cp, cm, alpha, False)
+    return _evaluate(seg, g0, None, cp, cm, alpha, False)[0]
+
+
+def hysteresis_sensitivity(
+    segments: Segments, h0: float, alpha: float, beta: float, gamma: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`hysteresis_path` and its exact derivatives (forward mode along the runs).
+
+    Returns ``h`` (N,) and ``dh`` (N, 3): the derivatives with respect to
+    ``beta + gamma``, ``beta - gamma`` and ``h0`` (alpha held).
+    """
+    cp, cm = beta + gamma, beta - gamma
+    g0, d0 = _runs(segments, h0, cp, cm, alpha, True)
+    return _evaluate(segments, g0, d0, cp, cm, alpha, True)
 
 
 def linear_matrices(a1: float, a2: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -120,22 +275,27 @@ def linear_response(phi: np.ndarray, b: np.ndarray, w: np.ndarray, x0: np.ndarra
 
     The state recursion written as its transfer function from ``w_k`` to
     ``x1_{k+1}``, ``(b1 + (p12 b2 - p22 b1) z^-1) / (1 - tr(Phi) z^-1 + det(Phi) z^-2)``,
-    started exactly from the first two outputs.
+    started exactly from the first two outputs. ``w`` may be ``(N, m)`` with ``x0``
+    ``(2, m)``: ``m`` responses in one filter call (the columns of a Jacobian).
     """
+    w = np.asarray(w, dtype=float)
+    x0 = np.asarray(x0, dtype=float)
     n = len(w)
-    y = np.empty(n)
-    x1 = phi @ x0 + b * w[0]
+    y = np.empty(w.shape)
+    x1 = phi @ x0 + np.multiply.outer(b, w[0])
     y[0] = x1[0]
     if n == 1:
         return y
-    y[1] = (phi @ x1 + b * w[1])[0]
+    y[1] = (phi @ x1 + np.multiply.outer(b, w[1]))[0]
     if n == 2:
         return y
     # y[k] = x1(t_{k+1}) = tr y[k-1] - det y[k-2] + n1 w[k] + n2 w[k-1]
-    num = np.array([b[0], phi[0, 1] * b[1] - phi[1, 1] * b[0]])
-    den = np.array([1.0, -(phi[0, 0] + phi[1, 1]), phi[0, 0] * phi[1, 1] - phi[0, 1] * phi[1, 0]])
-    zi = lfiltic(num, den, y=[y[1], y[0]], x=[w[1]])
-    y[2:], _ = lfilter(num, den, w[2:], zi=zi)
+    n1, n2 = b[0], phi[0, 1] * b[1] - phi[1, 1] * b[0]
+    d1 = -(phi[0, 0] + phi[1, 1])
+    d2 = phi[0, 0] * phi[1, 1] - phi[0, 1] * phi[1, 0]
+    # the transposed direct form's state that continues from y[1], y[0] (as lfiltic)
+    zi = np.array([n2 * w[1] - d1 * y[1] - d2 * y[0], -d2 * y[1]])
+    y[2:], _ = lfilter([n1, n2], [1.0, d1, d2], w[2:], axis=0, zi=zi)
     return y
 
 

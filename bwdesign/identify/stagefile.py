@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from .._version import __version__
@@ -22,20 +24,46 @@ def _comment(text: str, width: int = 96) -> list[str]:
     return lines
 
 
-def stage_toml(result: IdentificationResult, data: IdentificationData) -> str:
+def _records_head(result: IdentificationResult, records: list[IdentificationData]) -> list[str]:
+    """The header lines naming the record(s) fitted."""
+    if len(records) == 1:
+        data = records[0]
+        return [
+            f"# Identified by bwdesign {__version__} from {data.source or 'a record'}:",
+            f"# {data.n} samples at dt = {data.dt:.9g} s. ",
+        ]
+    head = [
+        f"# Identified by bwdesign {__version__} from {len(records)} records fitted together "
+        "(one parameter set, a sensor offset and initial state each):"
+    ]
+    for k, (data, rec) in enumerate(zip(records, result.records, strict=True)):
+        head.append(
+            f"#   {k + 1}. {data.source or 'a record'}: {data.n} samples at dt = {data.dt:.9g} s, "
+            f"fit {rec['fit_percent']:.3f} %, sensor offset {rec['offset']:.6g} um"
+        )
+    return head + ["# [sampling] and [reference] come from record 1. "]
+
+
+def stage_toml(
+    result: IdentificationResult, data: IdentificationData | Sequence[IdentificationData]
+) -> str:
     """A stage file every bwdesign command accepts, with the intervals in [uncertainty].
 
-    ``[reference]`` is a sine over the displacement range of the record at its
-    dominant input frequency and ``[envelope]`` is derived from it (10 %
-    margin): placeholders for the operating trajectory, which the user should
-    replace with their own before certifying.
+    ``data``: the training record, or the records fitted together (the header
+    lists each one's fit and offset; ``[sampling]`` and ``[reference]`` come from
+    the first). ``[reference]`` is a sine over the displacement range of the
+    record at its dominant input frequency and ``[envelope]`` is derived from it
+    (10 % margin): placeholders for the operating trajectory, which the user
+    should replace with their own before certifying.
     """
+    records = [data] if isinstance(data, IdentificationData) else list(data)
+    data = records[0]
     fp = result.fit_percent
     val = f"{fp['validation']:.3f} %" if fp["validation"] is not None else "no validation record"
+    first = _records_head(result, records)
     head = [
-        f"# Identified by bwdesign {__version__} from {data.source or 'a record'}:",
-        f"# {data.n} samples at dt = {data.dt:.9g} s. Fit: train {fp['train']:.3f} %, "
-        f"validation {val};",
+        *first[:-1],
+        f"{first[-1]}Fit: train {fp['train']:.3f} %, validation {val};",
         f"# residual RMS {result.residual_rms:.4g} um; sensor offset {result.offset:.6g} um; "
         f"input delay {result.delay_samples} sample(s).",
         f"# converged: {result.converged} ({result.reason})",

@@ -10,8 +10,16 @@ __all__ = ["plot_fit_time", "plot_fit_loop", "plot_residuals"]
 
 
 def plot_fit_time(traces: dict[str, np.ndarray], *, title: str = "", length_unit: str = "um"):
-    """Measured and model displacement over time (training, and validation if given)."""
-    sets = [("training", "")] + ([("validation", "val_")] if "val_t" in traces else [])
+    """Measured and model displacement over time, one column per record (training records
+    first: ``t``, ``r2_t``, ...; then validation: ``val_t``, ``val2_t``, ...)."""
+    sets = [("training", "")]
+    for role, pre in (("training", "r{}_"), ("validation", "val{}_")):
+        for k in range(2 if role == "training" else 1, 100):
+            key = pre.format("" if k == 1 else k)
+            if key + "t" not in traces:
+                break
+            label = role if k == 1 and role == "validation" else f"{role} {k}"
+            sets.append((label, key))
     fig, axes = new_figure(2, len(sets), figsize=(5.5 * len(sets), 5.2), sharex="col")
     for j, (label, pre) in enumerate(sets):
         t, y, ym = traces[pre + "t"], traces[pre + "y"], traces[pre + "y_model"]

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .._version import __version__
-from ..identify.result import IdentificationResult
+from ..identify.result import Z95, IdentificationResult
 from ..output.files import DirectoryTarget, prepare_directory
 from ..output.jsonenc import dump_json
 from .document import Document
@@ -114,6 +114,8 @@ def identification_document(
         ],
     )
     doc.para(f"Intervals: {result.covariance_method}.")
+    if len(result.records) > 1 or len(result.validation_records) > 1:
+        _records_table(doc, result)
     doc.heading("Correlation matrix")
     corr = result.correlation
     doc.table(
@@ -139,6 +141,40 @@ def identification_document(
         f"{result.seconds:.2f} s\nconverged {result.converged}: {result.reason}"
     )
     return doc
+
+
+def _records_table(doc: Document, result: IdentificationResult) -> None:
+    """Per record: fit percent, residual RMS and (training) the sensor offset."""
+    doc.heading("Records")
+    doc.para(
+        f"{len(result.records)} training record(s) fitted together: one parameter set, a "
+        "sensor offset and an initial state per record (offsets with 95 % half-widths); "
+        "validation records re-estimate their own offset and initial state."
+    )
+    rows = []
+    for role, recs in (("training", result.records), ("validation", result.validation_records)):
+        for rec in recs:
+            offset = (
+                f"{rec['offset']:.6g} ± {Z95 * rec['offset_std_err']:.2g}"
+                if "offset" in rec
+                else "-"
+            )
+            rows.append(
+                [
+                    role,
+                    f"`{rec['source'] or 'record'}`",
+                    str(rec["n_samples"]),
+                    f"{rec['dt']:.6g}",
+                    f"{rec['fit_percent']:.3f}",
+                    f"{rec['residual_rms']:.4g}",
+                    offset,
+                ]
+            )
+    doc.table(
+        ["record", "source", "samples", "dt (s)", "fit (%)", "residual RMS (um)", "offset (um)"],
+        rows,
+        id="records",
+    )
 
 
 def write_identification_report(
