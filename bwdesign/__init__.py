@@ -60,7 +60,7 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     from .model.plant import hysteresis_increment, simulate_zoh, zoh_step
     from .model.references import Sine, Step, Triangle
     from .model.stage_presets import stage_presets
-    from .model.uncertainty import UncertaintyBox
+    from .model.uncertainty import DisturbanceBound, UncertaintyBox
     from .observers.sampled import (
         DisturbanceHysteresisObserver,
         ExtendedStateObserver,
@@ -113,7 +113,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".model.plant": ("hysteresis_increment", "simulate_zoh", "zoh_step"),
     ".model.references": ("Sine", "Step", "Triangle"),
     ".model.stage_presets": ("stage_presets",),
-    ".model.uncertainty": ("UncertaintyBox",),
+    ".model.uncertainty": ("UncertaintyBox", "DisturbanceBound"),
     ".observers.sampled": (
         "DisturbanceHysteresisObserver",
         "ExtendedStateObserver",
@@ -212,6 +212,7 @@ __all__ = [
     "identify",
     "IdentificationResult",
     "UncertaintyBox",
+    "DisturbanceBound",
 ]
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -214,3 +215,43 @@ def test_check_passes_exactly_when_every_corner_is_a_bounded_model():
         assert ok is usable, box
         outcomes.add(ok)
     assert outcomes == {True, False}
+
+
+# -- the unexplained-behaviour bound (issue 26, Build 3) ----------------------------
+
+
+def test_disturbance_bound_from_a_stage_file(tmp_path):
+    from bwdesign import DisturbanceBound, load_config
+
+    text = Path("configs/paper_experiment.toml").read_text()
+    text += (
+        "\n[uncertainty]\na3 = { rel = 0.02 }\n\n[uncertainty.disturbance]\n"
+        'input_max = 0.35\nrate_max = 2.0\nsource = "identified"\n'
+    )
+    f = tmp_path / "stage.toml"
+    f.write_text(text)
+    cfg = load_config(f)
+    assert cfg.disturbance == DisturbanceBound(0.35, 2.0, "identified")
+    assert not cfg.disturbance.none and DisturbanceBound(0, 0).none
+    assert DisturbanceBound.from_dict(cfg.disturbance.to_dict()) == cfg.disturbance
+    assert "input_max = 0.35" in cfg.disturbance.to_toml()
+    assert load_config("configs/paper_experiment.toml").disturbance is None
+
+
+@pytest.mark.parametrize(
+    "table, match",
+    [
+        ({"input_max": -1.0, "rate_max": 0.0}, r"input_max = -1 is outside"),
+        ({"input_max": float("inf"), "rate_max": 0.0}, "must be finite"),
+        ({"input_max": "1", "rate_max": 0.0}, "must be a number"),
+        ({"input_max": 1.0}, "missing rate_max"),
+        ({"input_max": 1.0, "rate_max": 1.0, "amplitude": 1}, "unknown key"),
+        ({"input_max": 1.0, "rate_max": 1.0, "source": "guessed"}, "source must be one of"),
+    ],
+)
+def test_a_bad_disturbance_table_is_a_config_error(table, match):
+    from bwdesign.model.uncertainty import DisturbanceBound
+
+    with pytest.raises(ConfigError, match=match) as err:
+        DisturbanceBound.from_dict(table)
+    assert "[uncertainty.disturbance]" in str(err.value)

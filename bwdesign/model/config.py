@@ -52,7 +52,7 @@ from .plant import check_sample_time
 from .references import Reference, reference_from_dict
 from .requirements import parse_requirements
 from .stage_presets import resolve_config, stage_presets, unknown_plant_message
-from .uncertainty import UncertaintyBox
+from .uncertainty import DisturbanceBound, UncertaintyBox
 
 __all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant", "parse_toml"]
 
@@ -127,6 +127,9 @@ class StageConfig:
         The ``[sweep]`` the report runs over ``[uncertainty]`` (off when absent).
     uncertainty : UncertaintyBox or None
         The ``[uncertainty]`` section (None when absent or when it lists no parameter).
+    disturbance : DisturbanceBound or None
+        ``[uncertainty.disturbance]``: what the model does not explain, as a bounded,
+        slowly varying input-equivalent disturbance (None when absent).
     source : str
         Path of the file.
     sha256 : str
@@ -142,6 +145,7 @@ class StageConfig:
     synthesis: dict[str, float] | None = None
     requirements: dict[str, Any] | None = None
     uncertainty: UncertaintyBox | None = None
+    disturbance: DisturbanceBound | None = None
     sweep: dict[str, Any] | None = None
     source: str = ""
     sha256: str = ""
@@ -329,12 +333,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
 
     sweep = _sweep(data["sweep"]) if "sweep" in data else None
 
-    uncertainty = None
-    if "uncertainty" in data:
-        uncertainty = UncertaintyBox.from_dict(data["uncertainty"])
-        if not uncertainty.widths:  # a section with no parameter: every parameter exact
-            uncertainty = None
-
+    uncertainty, disturbance = _uncertainty(data.get("uncertainty"))
     return StageConfig(
         plant=plant,
         gains=gains,
@@ -347,10 +346,21 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         if "requirements" in data
         else None,
         uncertainty=uncertainty,
+        disturbance=disturbance,
         sweep=sweep,
         source=source,
         sha256=sha256,
     )
+
+
+def _uncertainty(table: Any) -> tuple[UncertaintyBox | None, DisturbanceBound | None]:
+    """``[uncertainty]`` (None when absent or when it lists no parameter) and its
+    ``[uncertainty.disturbance]`` (None when absent)."""
+    if table is None:
+        return None, None
+    box = UncertaintyBox.from_dict(table)
+    dist = DisturbanceBound.from_dict(table["disturbance"]) if "disturbance" in table else None
+    return (box if box.widths else None), dist
 
 
 #: Largest stage file read (bytes): a stage file is a few hundred bytes.

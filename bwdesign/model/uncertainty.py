@@ -29,10 +29,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import BWDesignError, ConfigError, InputError, ParameterError
-from ..validate import Range, parse_real
+from ..validate import NONNEGATIVE, Range, parse_real, real
 from .params import MODEL_FIELDS, BoucWenParams
 
-__all__ = ["UncertaintyBox"]
+__all__ = ["UncertaintyBox", "DisturbanceBound"]
 
 _KINDS = ("rel", "abs")
 _SOURCES = ("identified", "specified")
@@ -139,7 +139,7 @@ class UncertaintyBox:
         """
         if not isinstance(data, dict):
             raise ConfigError(f"[uncertainty] must be a table, got {type(data).__name__}")
-        allowed = {"source", "level", *MODEL_FIELDS}
+        allowed = {"source", "level", "disturbance", *MODEL_FIELDS}
         unknown = sorted(set(data) - allowed)
         if unknown:
             raise ConfigError(
@@ -370,3 +370,86 @@ def _require_bounded_corners(b: dict[str, tuple[float, float]]) -> None:
                     "narrow the box",
                     field=name,
                 )
+
+
+@dataclass(frozen=True)
+class DisturbanceBound:
+    """What the model does not explain, as a slowly varying input-equivalent disturbance.
+
+    The plant is taken as ``x2' = -a1 x1 - a2 x2 - a1 x3 + a3 (u + d)`` with
+    ``|d(t)| <= input_max`` and ``|d'(t)| <= rate_max``: creep, an amplifier lag, drift
+    or a second mode that the Bouc-Wen model misses, in the input's unit. The observers,
+    certificates and firmware keep the Bouc-Wen model; ``d`` is what they must tolerate.
+    Stage file::
+
+        [uncertainty.disturbance]
+        input_max = 0.35      # |d| <= input_max (input unit)
+        rate_max = 2.0        # |d'| <= rate_max (input unit/s)
+        source = "identified" # or "specified"
+
+    Parameters
+    ----------
+    input_max : float
+        Bound on ``|d|`` (input unit), finite and >= 0.
+    rate_max : float
+        Bound on ``|d'|`` (input unit/s), finite and >= 0.
+    source : {"identified", "specified"}
+
+    Raises
+    ------
+    InputError
+        A bound that is not a finite number >= 0, or an unknown source
+        (:meth:`from_dict` raises ``ConfigError`` for a stage file's table).
+    """
+
+    input_max: float
+    rate_max: float
+    source: str = "specified"
+
+    def __post_init__(self) -> None:
+        self._check(InputError, "DisturbanceBound")
+
+    def _check(self, error: type[BWDesignError], where: str) -> None:
+        for name in ("input_max", "rate_max"):
+            value = real(getattr(self, name), f"{where} {name}", within=NONNEGATIVE, error=error)
+            object.__setattr__(self, name, value)
+        if self.source not in _SOURCES:
+            raise error(f"{where} source must be one of {', '.join(_SOURCES)}, got {self.source!r}")
+
+    @property
+    def none(self) -> bool:
+        """Both bounds are 0: the model is taken to explain the stage."""
+        return self.input_max == 0 and self.rate_max == 0
+
+    @classmethod
+    def from_dict(cls, data: Any) -> DisturbanceBound:
+        """Build from a parsed ``[uncertainty.disturbance]`` table (strict keys and types)."""
+        where = "[uncertainty.disturbance]"
+        if not isinstance(data, dict):
+            raise ConfigError(f"{where} must be a table, got {type(data).__name__}")
+        allowed = {"input_max", "rate_max", "source"}
+        unknown = sorted(set(data) - allowed)
+        if unknown:
+            raise ConfigError(
+                f"{where}: unknown key(s) {', '.join(unknown)}; allowed keys are "
+                f"{', '.join(sorted(allowed))}"
+            )
+        missing = [k for k in ("input_max", "rate_max") if k not in data]
+        if missing:
+            raise ConfigError(f"{where}: missing {', '.join(missing)}")
+        try:
+            return cls(data["input_max"], data["rate_max"], data.get("source", "specified"))
+        except InputError as err:
+            raise ConfigError(str(err).replace("DisturbanceBound", where)) from None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"input_max": self.input_max, "rate_max": self.rate_max, "source": self.source}
+
+    def to_toml(self) -> str:
+        """The ``[uncertainty.disturbance]`` table as stage-file text."""
+        return (
+            "[uncertainty.disturbance]\n"
+            f"input_max = {self.input_max!r}\n"
+            f"rate_max = {self.rate_max!r}\n"
+            f'source = "{self.source}"\n'
+        )
