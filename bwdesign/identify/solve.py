@@ -14,6 +14,14 @@ decrease is then below ``STEP_TOL**2`` noise variances per direction. A
 direction the record does not determine has a large standard error, so a large
 move along it is still a small step: it is reported by the intervals, never a
 reason to keep iterating. ``max_nfev`` only caps the work.
+
+Where the model misses part of the behaviour (creep, an amplifier lag), the
+residual is large and coloured and the Gauss-Newton model of the misfit is poor:
+the linearised step stays large while no step of the damped iteration lowers the
+misfit by anything the data could tell apart. The fit is then stationary:
+converged too, when the misfit fell by less than :data:`STATIONARY_FALL` noise
+variances over the last :data:`STATIONARY_STEPS` accepted steps (a change of the
+fit far below its own scatter).
 """
 
 from __future__ import annotations
@@ -30,6 +38,10 @@ __all__ = ["Solution", "solve", "STEP_TOL"]
 
 #: Largest Gauss-Newton step (in standard errors, per determined direction) at convergence.
 STEP_TOL = 0.05
+#: Stationary misfit: over this many accepted steps ...
+STATIONARY_STEPS = 10
+#: ... the sum of squared residuals fell by less than this many noise variances.
+STATIONARY_FALL = 0.1
 #: Singular values below this fraction of the largest span no direction (rounding).
 _RANK_TOL = 1e-10
 
@@ -81,6 +93,7 @@ def solve(
         return theta, Solution(cost, nfev, njev, 0, "the start is not finite", math.inf)
     lam, crit = None, math.inf
     n = r.size
+    accepted = [cost]
     while True:
         jac = prob.jacobian(theta, jfree)
         njev += 1
@@ -122,6 +135,10 @@ def solve(
             if math.isfinite(ct) and ct < cost:
                 theta, r, cost = trial, rt, ct
                 lam = max(lam / 5.0, 1e-12 * s[0] ** 2)
+                accepted.append(cost)
+                fell = _stationary(accepted, sigma)
+                if fell is not None:
+                    return theta, Solution(cost, nfev, njev, 3, _msg_stationary(fell), crit)
                 break
             lam *= 4.0
             if lam > 1e12 * s[0] ** 2:
@@ -136,6 +153,24 @@ def solve(
                     "errors)",
                     crit,
                 )
+
+
+def _stationary(accepted: list[float], sigma: float) -> float | None:
+    """The misfit's fall over the last :data:`STATIONARY_STEPS` accepted steps, in noise
+    variances, when it is below :data:`STATIONARY_FALL` (else None)."""
+    if len(accepted) <= STATIONARY_STEPS:
+        return None
+    fell = (accepted[-STATIONARY_STEPS - 1] - accepted[-1]) / (0.5 * sigma * sigma)
+    return fell if fell < STATIONARY_FALL else None
+
+
+def _msg_stationary(fell: float) -> str:
+    return (
+        f"converged: the misfit is stationary (it fell by {fell:.2g} noise variances over "
+        f"the last {STATIONARY_STEPS} steps, tolerance {STATIONARY_FALL:g}); the linearised "
+        "step is larger than the fit's scatter supports, as where the model misses part of "
+        "the behaviour"
+    )
 
 
 def _msg(crit: float) -> str:
