@@ -261,7 +261,8 @@ def _multistart(
     """The derived start refined, then seeded perturbations of the optimum refined.
 
     A perturbation that ends with a lower misfit replaces the optimum (a check
-    that the optimum is not a local one; from near it each costs a few steps).
+    that the optimum is not a local one; from near it each costs a few steps, and at
+    most a quarter of ``max_nfev``).
     """
     rng = np.random.default_rng(seed)
     theta, sol = _refine(prob, start, free, max_nfev)
@@ -274,7 +275,8 @@ def _multistart(
     for i in range(1, max(1, multistart)):
         th0 = theta + np.where(free, scale * rng.standard_normal(theta.size), 0.0)
         th0[IQ] = float(np.clip(th0[IQ], -Q_MAX + 0.1, Q_MAX - 0.1))
-        th, sol_i = _refine(prob, th0, free, max_nfev)
+        # a check for a better basin, not a second fit: a quarter of the budget
+        th, sol_i = _refine(prob, th0, free, max(1, max_nfev // 4))
         total += sol_i.nfev
         say(f"  start {i + 1}/{multistart}: cost {2 * sol_i.cost:.6g} after {sol_i.nfev} evals")
         if sol_i.cost < sol.cost * (1 - 1e-9) and (sol_i.status > 0 or sol.status == 0):
