@@ -191,3 +191,40 @@ def test_observer_certificate_with_a_disturbance_covers_the_brute_force():
     # None and a zero bound are the certificate without a disturbance
     zero = certify_robust_observer(p, PHSO, disturbance=DisturbanceBound(0.0, 0.0), **kw)
     assert zero.to_dict() == calm.to_dict()
+
+
+def test_worst_case_and_sweep_signals_keep_the_bound():
+    from bwdesign.sim.corners import disturbance_signals
+    from bwdesign.sim.sweep import scenario_disturbance
+
+    t = np.arange(20000) * DT
+    for bound in (BOUND, DisturbanceBound(0.5, 0.0), DisturbanceBound(0.0, 3.0)):
+        for rows in (disturbance_signals(bound, t), scenario_disturbance(bound, [1, 2, 3], t)):
+            assert np.max(np.abs(rows)) <= bound.input_max * (1 + 1e-12)
+            step = np.max(np.abs(np.diff(rows, axis=1)))
+            assert step <= bound.rate_max * DT * (1 + 1e-9)
+    rows = scenario_disturbance(BOUND, [1, 2, 1], t)
+    assert np.array_equal(rows[0], rows[2]) and not np.array_equal(rows[0], rows[1])  # seeded
+    assert np.max(np.abs(disturbance_signals(BOUND, t))) == pytest.approx(BOUND.input_max)
+
+
+def test_the_sweep_reads_the_stage_disturbance():
+    import dataclasses
+
+    from bwdesign import load_config
+    from bwdesign.sim.sweep import draw_scenarios, run_chunk, spec_from_config
+
+    cfg = load_config("configs/stack_actuator_800hz.toml")
+    assert cfg.disturbance is None  # the bundled stages carry none
+    plain = spec_from_config(cfg, observers=("phso",), duration=0.5)
+    assert plain.disturbance is None
+    bound = DisturbanceBound(1.0, 20.0)
+    spec = spec_from_config(
+        dataclasses.replace(cfg, disturbance=bound), observers=("phso",), duration=0.5
+    )
+    assert spec.disturbance == bound
+    cols = draw_scenarios(spec.params, spec.box, 3, seed=4)
+    a, b = run_chunk(plain, cols), run_chunk(spec, cols)
+    assert np.all(a["stable"]) and np.all(b["stable"])
+    assert not np.allclose(a["maxe"], b["maxe"])  # the disturbance moved the plant
+    assert np.array_equal(b["maxe"], run_chunk(spec, cols)["maxe"])  # and is seeded
