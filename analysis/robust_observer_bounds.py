@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from bwdesign import (
+    BoxSampling,
     HysteresisObserver,
     UncertaintyBox,
     certify_robust_observer,
@@ -91,7 +92,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|")
     for name, p, gains, dt, udot, rng, box, nm, sec in cases():
         kw = {"dt": dt, "uncertainty": box, "udot_max": udot, "input_range": rng}
-        kw |= {"noise_max": nm, "interior_samples": 16}
+        kw |= {"noise_max": nm, "sampling": BoxSampling(16)}
         runs = [("given", certify_robust_observer(p, gains, **kw))]
         if "60" not in name:
             for target in ("x3", "x1"):

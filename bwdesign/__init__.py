@@ -35,6 +35,7 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     from .certify.results import CertificateReport, Margin, SynthesisResult, TierCertificate
     from .certify.robust import RobustCertificate, certify_robust
     from .certify.robust_observer import (
+        BoxSampling,
         RobustObserverCertificate,
         certify_robust_observer,
         certify_robust_observer_discrete,
@@ -82,6 +83,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".certify.results": ("CertificateReport", "Margin", "SynthesisResult", "TierCertificate"),
     ".certify.robust": ("RobustCertificate", "certify_robust"),
     ".certify.robust_observer": (
+        "BoxSampling",
         "RobustObserverCertificate",
         "certify_robust_observer",
         "certify_robust_observer_discrete",
@@ -199,6 +201,7 @@ __all__ = [
     "synthesize_robust_observer",
     "RobustObserverCertificate",
     "RobustObserverSynthesis",
+    "BoxSampling",
     "synthesize",
     "CertificateReport",
     "TierCertificate",

@@ -39,7 +39,7 @@ from bwdesign import (
     synthesize,
 )
 from bwdesign.certify.disturbance import certify_disturbance
-from bwdesign.certify.robust_observer import certify_robust_observer
+from bwdesign.certify.robust_observer import BoxSampling, certify_robust_observer
 from bwdesign.cli.main import main
 from bwdesign.control.controllers import TrackingController
 from bwdesign.design.robust import RobustSearch, synthesize_robust
@@ -776,7 +776,7 @@ PYTHON += [
             uncertainty=BOX,
             udot_max=361,
             input_range=(0, 120),
-            interior_samples=-1,
+            sampling=BoxSampling(-1),
         ),
         InputError,
         "interior_samples = -1 is outside",

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from bwdesign import (
+    BoxSampling,
     HysteresisObserver,
     UncertaintyBox,
     certify_robust_observer,
@@ -101,7 +102,7 @@ def _brute(model, box, *, n_interior=2, seconds=1.0, noise_max=0.0, seed=1, **kw
 
 
 def _cert(p, box, **kw):
-    kw = {"interior_samples": 2, "input_range": RANGE} | kw
+    kw = {"sampling": BoxSampling(2), "input_range": RANGE} | kw
     return certify_robust_observer(
         p, GAINS, dt=DT, uncertainty=UncertaintyBox.from_dict(box), udot_max=UDOT, **kw
     )
@@ -145,8 +146,8 @@ def test_noise_enters_the_bound_and_the_brute_force_stays_below():
 
 def test_the_bound_grows_with_the_box():
     p = preset("paper_experiment")
-    narrow = _cert(p, {"a3": {"rel": 0.02}}, interior_samples=0)
-    wide = _cert(p, {"a3": {"rel": 0.6}}, interior_samples=0)
+    narrow = _cert(p, {"a3": {"rel": 0.02}}, sampling=BoxSampling(0))
+    wide = _cert(p, {"a3": {"rel": 0.6}}, sampling=BoxSampling(0))
     assert narrow.holds and wide.holds
     assert wide.input_bounds["m2"] == pytest.approx(30 * narrow.input_bounds["m2"], rel=1e-6)
     assert wide.estimation_bound > 10 * narrow.estimation_bound
@@ -171,7 +172,7 @@ def test_an_input_rate_too_high_is_not_certified_with_the_reason():
     for udot, why in ((1e6, "no common Lyapunov function"), (1e7, "input bound is infinite")):
         rc = certify_robust_observer(
             p, GAINS, dt=DT, uncertainty=box, udot_max=udot, input_range=RANGE,
-            interior_samples=0,
+            sampling=BoxSampling(0),
         )  # fmt: skip
         assert not rc.holds and rc.estimation_bound is None
         assert rc.status.startswith("not certified") and why in rc.status
@@ -226,7 +227,7 @@ def test_bad_input_is_refused():
 def test_the_discrete_gain_certifies_as_its_continuous_gains_do():
     p = _custom()
     box = UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
-    kw = dict(dt=DT, uncertainty=box, udot_max=UDOT, input_range=RANGE, interior_samples=2)
+    kw = dict(dt=DT, uncertainty=box, udot_max=UDOT, input_range=RANGE, sampling=BoxSampling(2))
     given = certify_robust_observer(p, GAINS, a=0.97, **kw)
     K = discrete_gains(p, GAINS, DT)
     direct = certify_robust_observer_discrete(p, K, a=0.97, **kw)
@@ -239,8 +240,8 @@ def test_synthesis_beats_the_given_gains_and_is_recertified(target):
     p = _custom()
     box = UncertaintyBox.from_dict(SMALL)
     kw = {"dt": DT, "uncertainty": box, "udot_max": UDOT, "input_range": RANGE, "noise_max": 0.05}
-    given = certify_robust_observer(p, GAINS, interior_samples=2, **kw)
-    res = synthesize_robust_observer(p, target=target, interior_samples=2, **kw)
+    given = certify_robust_observer(p, GAINS, sampling=BoxSampling(2), **kw)
+    res = synthesize_robust_observer(p, target=target, sampling=BoxSampling(2), **kw)
     assert res.feasible, res.reason
     cert = res.certificate
     assert cert.holds and cert.details["K"] == pytest.approx(list(res.discrete_gains))
@@ -257,7 +258,7 @@ def test_synthesis_with_a_pole_disk_has_a_continuous_equivalent():
     p = preset("paper_experiment")
     res = synthesize_robust_observer(
         p, dt=DT, uncertainty=UncertaintyBox.from_dict(SMALL), udot_max=UDOT,
-        input_range=RANGE, noise_max=0.05, pole_radius=2000.0, interior_samples=0,
+        input_range=RANGE, noise_max=0.05, pole_radius=2000.0, sampling=BoxSampling(0),
     )  # fmt: skip
     assert res.feasible, res.reason
     assert res.gains is not None
@@ -276,7 +277,7 @@ def test_synthesis_solver_trouble_is_infeasible(monkeypatch):
     monkeypatch.setattr(lmi, "robust_observer_synthesis", broken)
     res = synthesize_robust_observer(
         _custom(), dt=DT, uncertainty=UncertaintyBox.from_dict(SMALL), udot_max=UDOT,
-        input_range=RANGE, interior_samples=0,
+        input_range=RANGE, sampling=BoxSampling(0),
     )  # fmt: skip
     assert not res.feasible and res.certificate is None and res.gains is None
     assert "solver_error" in res.reason
@@ -285,7 +286,7 @@ def test_synthesis_solver_trouble_is_infeasible(monkeypatch):
 @pytest.mark.slow
 def test_paper_experiment_64_corners_against_brute_force():
     p = preset("paper_experiment")
-    rc = _cert(p, PAPER_BOX, interior_samples=8)
+    rc = _cert(p, PAPER_BOX, sampling=BoxSampling(8))
     assert rc.holds, rc.status
     assert rc.n_vertices == 64
     sim = _brute(p, UncertaintyBox.from_dict(PAPER_BOX), n_interior=4, seconds=0.6)

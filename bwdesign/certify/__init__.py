@@ -21,6 +21,7 @@ from .linear import (
 from .results import TIERS, CertificateReport, Margin, SynthesisResult, TierCertificate
 from .robust import RobustCertificate, certify_robust
 from .robust_observer import (
+    BoxSampling,
     RobustObserverCertificate,
     certify_robust_observer,
     certify_robust_observer_discrete,
@@ -43,6 +44,7 @@ __all__ = [
     "certify_robust_observer",
     "certify_robust_observer_discrete",
     "RobustObserverCertificate",
+    "BoxSampling",
     "ErrorDynamics",
     "HysteresisBode",
     "error_system",

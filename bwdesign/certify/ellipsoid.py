@@ -17,7 +17,27 @@ import numpy as np
 
 from ..model.params import BoucWenParams
 
-__all__ = ["solution", "schur_min_eig", "search_log_contraction", "jump_mismatch"]
+__all__ = [
+    "solution",
+    "schur_min_eig",
+    "search_log_contraction",
+    "jump_mismatch",
+    "disturbance_remainder",
+]
+
+
+def disturbance_remainder(a3: float, rate_max: float, dt: float) -> np.ndarray:
+    """Bounds on what an input disturbance moving within a sample adds to the held one.
+
+    The plant's linear part gains ``r = int_0^dt e^{A(dt - s)} b (d(t_k + s) - d_k) ds``
+    over sample ``k`` (``b = (0, a3)``, ``|d(t_k + s) - d_k| <= rate_max s``) beside its
+    ZOH step with ``d_k`` held. With ``a1 > 0`` and ``a2 >= 0`` the energy ``a1 x1^2 +
+    x2^2`` of ``x' = A x`` does not grow, so ``|(e^{A tau} b)_2| <= |a3|`` and
+    ``|(e^{A tau} b)_1| <= |a3| tau``: ``|r1| <= rate_max |a3| dt^3 / 6`` and ``|r2| <=
+    rate_max |a3| dt^2 / 2``.
+    """
+    a3 = abs(a3)
+    return np.array([rate_max * a3 * dt**3 / 6, rate_max * a3 * dt**2 / 2])
 
 
 def solution(sol: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -47,6 +47,23 @@ A loop that rejects a slowly varying model error (integral action, the PHDO's
 disturbance state) thus gets the credit the arbitrary-signal bound denied it. For
 the PHDO ``rho = 1`` is fixed and there is no coupling term.
 
+The input disturbance (``disturbance=DisturbanceBound(input_max, rate_max)``)
+-----------------------------------------------------------------------------
+What the model does not explain, as ``x2' = ... + a3 (u + d)`` on the true plant,
+``|d| <= input_max``, ``|d'| <= rate_max``; the observer and the law do not see it.
+Over sample ``k`` the plant's step gains ``g_true d_k + r_k`` (``d_k = d(t_k)`` held,
+``g_true`` the true ZOH input column) in ``delta`` and the same with a minus sign in
+``e``. The held part is slow: ``b_d d_k`` joins ``w_slow``, so its quasi-static part
+``|c' G^-1 b_d| input_max`` is added to each peak, its increment ``-G^-1 b_d (d_{k+1} -
+d_k)`` with ``|d_{k+1} - d_k| <= rate_max dt`` is an input of the ellipsoid, and (PHSO)
+its ``rho`` coupling joins the state channels. ``r`` is what a ``d`` moving within the
+sample adds to the held one, ``int_0^dt e^{A(dt-s)} b (d(t_k + s) - d_k) ds``: the
+energy ``a1 x1^2 + x2^2`` of the free plant does not grow (``a1 > 0``, ``a2 >= 0``),
+so ``|r1| <= rate_max |a3| dt^3 / 6`` and ``|r2| <= rate_max |a3| dt^2 / 2``, two fast
+inputs. A disturbance held over each sample (the simulators' ``input_disturbance``)
+is covered with room to spare. With no disturbance every added channel is 0 and
+is dropped: the certificate is the one without it.
+
 The disturbance observer (``observer="phdo"``, gains ``(l1, l2, 0, l3)``)
 ------------------------------------------------------------------------
 Its law uses the lumped ``x3hat + dhat``; its linear part sees only ``w = x3 + d``.
@@ -110,15 +127,23 @@ from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import discretize
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
-from ..model.uncertainty import UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from ..observers.gains import check_gains, discrete_gains
 from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
-from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction, solution
+from .ellipsoid import (
+    disturbance_remainder,
+    jump_mismatch,
+    schur_min_eig,
+    search_log_contraction,
+    solution,
+)
 from .results import CONTRACTION, Margin
 
 __all__ = ["RobustCertificate", "certify_robust"]
 
+#: Exogenous entries of one step: reference terms, x3, j, dh, n, d, r1, r2 (:func:`_step`).
+_NS = 12
 #: Normalised eigenvalue below which an interior block joins the LMI.
 _ACTIVE_TOL = 1e-9
 #: Contraction search: grid points on log(1 - a), then golden-section steps.
@@ -220,18 +245,23 @@ def _applied(lp: _Loop, z: np.ndarray, s: np.ndarray) -> float:
 def _step(lp: _Loop, Fv, gv, rho: float, z: np.ndarray, s: np.ndarray) -> np.ndarray:
     """One sample of the error system (linear in ``z`` and ``s``; see the module doc).
 
-    ``s = (x_d, x_d', x_d(k+1), x_d'(k+1), uref, x3, j, dh, n)`` with
-    ``uref = ff + Kx1 x_d + Kx2 x_d'``.
+    ``s = (x_d, x_d', x_d(k+1), x_d'(k+1), uref, x3, j, dh, n, d, r1, r2)`` with
+    ``uref = ff + Kx1 x_d + Kx2 x_d'``, ``d`` the input disturbance held over the
+    sample and ``r`` its within-sample remainder (both act on the plant only).
     """
     d, e = z[0:2], z[2:5]
     q = z[5] if lp.integral else 0.0
-    xd, vd, xd1, vd1, uref, x3, j, dh, n = s
+    xd, vd, xd1, vd1, uref, x3, j, dh, n = s[:9]
     ep = e - lp.K * e[0] + lp.K * n
     Kx = lp.Kx
     u = _applied(lp, z, s)
     xt = np.array([xd + d[0], vd + d[1], x3 + j])
     dn = Fv[:2] @ xt + gv[:2] * u - np.array([xd1, vd1])
     en = lp.Fm @ np.array([ep[0], ep[1], rho * ep[2] + dh]) + (lp.Fm - Fv) @ xt + (lp.gm - gv) * u
+    if np.any(s[9:]):  # the plant's extra step g_true d + r; the observer does not see it
+        pd = gv[:2] * s[9] + s[10:12]
+        dn = dn + pd
+        en = en - np.array([pd[0], pd[1], 0.0])
     out = [dn, en]
     if lp.integral:
         inc = dn[0] + en[0] if lp.delay else d[0] + ep[0]
@@ -244,7 +274,7 @@ def _step(lp: _Loop, Fv, gv, rho: float, z: np.ndarray, s: np.ndarray) -> np.nda
 def _matrices(lp: _Loop, Fv, gv, rho: float) -> tuple[np.ndarray, np.ndarray]:
     n = lp.n
     A = np.column_stack([_step(lp, Fv, gv, rho, z, np.zeros(9)) for z in np.eye(n)])
-    B = np.column_stack([_step(lp, Fv, gv, rho, np.zeros(n), s) for s in np.eye(9)])
+    B = np.column_stack([_step(lp, Fv, gv, rho, np.zeros(n), s) for s in np.eye(_NS)])
     return A, B
 
 
@@ -264,6 +294,7 @@ def certify_robust(
     a: float | None = None,
     interior_samples: int = 16,
     seed: int = 0,
+    disturbance: DisturbanceBound | None = None,
 ) -> RobustCertificate:
     """Certify a sampled PHSO (or PHDO) tracking loop over every plant in an uncertainty box.
 
@@ -299,6 +330,10 @@ def certify_robust(
     interior_samples : int
         Seeded interior points of the box where the same ``P`` is re-checked.
     seed : int
+    disturbance : DisturbanceBound, optional
+        A slowly varying input-equivalent disturbance ``d`` on every plant of the box
+        (``x2' = ... + a3 (u + d)``, ``|d| <= input_max``, ``|d'| <= rate_max``; the
+        stage's ``[uncertainty.disturbance]``). ``None`` (or both bounds 0): none.
 
     Returns
     -------
@@ -336,7 +371,7 @@ def certify_robust(
     vertices = uncertainty.vertices(params)
     rng = np.random.default_rng(seed)
     interior = uncertainty.sample(params, rng, int(interior_samples))
-    st = _setup(params, lp, observer, udot_max)
+    st = _setup(params, lp, observer, udot_max, _disturbance(disturbance))
     data_v = [_plant_data(st, tp) for tp in vertices]
     data_i = [_plant_data(st, tp) for tp in interior]
     data = data_v + data_i
@@ -360,6 +395,17 @@ def certify_robust(
         details = {"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []}
         return _not_certified(base, why, av, details, sol.solver if sol is not None else "")
     return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, lp.dt, base)
+
+
+def _disturbance(disturbance: Any) -> tuple[float, float]:
+    """``(input_max, rate_max)`` of the disturbance, ``(0, 0)`` for none."""
+    if disturbance is None:
+        return (0.0, 0.0)
+    if not isinstance(disturbance, DisturbanceBound):
+        raise InputError(
+            f"disturbance must be a DisturbanceBound or None, got {type(disturbance).__name__}"
+        )
+    return (disturbance.input_max, disturbance.rate_max)
 
 
 def _not_certified(
@@ -446,13 +492,17 @@ class _Setup:
     statics: tuple[np.ndarray, np.ndarray, np.ndarray]
     cu: np.ndarray
     su: np.ndarray
+    #: the input disturbance's bounds ``(input_max, rate_max)``, (0, 0) for none
+    dist: tuple[float, float] = (0.0, 0.0)
 
     @property
     def n(self) -> int:
         return self.lp.n
 
 
-def _setup(params: BoucWenParams, lp: _Loop, observer: str, udot_max: float) -> _Setup:
+def _setup(
+    params: BoucWenParams, lp: _Loop, observer: str, udot_max: float, dist: tuple[float, float]
+) -> _Setup:
     dt = lp.dt
     rho_lo, rho_hi = rho_interval(params, udot_max, dt)
     # the PHDO's lumped error: rho = 1 in the loop, (rho - 1) e3 an input beside dh
@@ -476,7 +526,7 @@ def _setup(params: BoucWenParams, lp: _Loop, observer: str, udot_max: float) -> 
     su = np.array([_applied(lp, np.zeros(n), v) for v in np.eye(9)])
     return _Setup(
         params, lp, observer, udot_max, udot_max * dt, rho_lo, rho_hi, rhos, M, M1 - M, statics,
-        cu, su,
+        cu, su, dist,
     )  # fmt: skip
 
 
@@ -494,6 +544,7 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     G = np.eye(n) - np.mean([A for A, _ in mats], axis=0)
     GiB = np.linalg.solve(G, Bref)  # w_slow's reference part: G^-1 Bref M sigma
     Gib = np.linalg.solve(G, bx3)
+    Gid = np.linalg.solve(G, mats[0][1][:, 9])  # the held disturbance's quasi-static part
     rows = [GiB @ dM]  # the increments of the reference terms, per state
     if len(rhos) == 2:
         E = (mats[1][0] - mats[0][0]) / (rhos[1] - rhos[0])
@@ -502,13 +553,19 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     for A, _ in mats:  # the input steps' reference part, per rho end (_input_step)
         v = (A - np.eye(n)).T @ st.cu
         rows.append(((v @ GiB + st.cu @ Bref) @ M + st.su[:5] @ dM)[None, :])
-    blocks = [(A, np.column_stack([np.eye(n), B[:, 6] - Gib, B[:, 7:]])) for A, B in mats]
+    # fast inputs (j, dh, n), then the disturbance's increment and within-sample remainder
+    blocks = [
+        (A, np.column_stack([np.eye(n), B[:, 6] - Gib, B[:, 7:9], -Gid, B[:, 10:12]]))
+        for A, B in mats
+    ]
     E_b = E if len(rhos) == 2 else None
     return {
         "blocks": blocks,
         "hyst": (hv, j, dh),
         "mats": mats,
         "Gib": Gib,
+        "Gid": Gid,
+        "a3": abs(tp.a3),
         "E": E_b,
         "rows": np.vstack(rows),
     }
@@ -523,6 +580,7 @@ def _cover(
     worst hysteresis bounds ``(x3, j, dh)``, the channel bounds ``W`` and their report.
     """
     n, rhos = st.n, st.rhos
+    dmax, dstep = st.dist[0], st.dist[1] * st.lp.dt  # |d|, |d_{k+1} - d_k|
     # sup over every t >= 0 of every reference row, all plants at once (refuses a
     # reference it cannot cover: neither periodic nor settling, or no stated structure)
     sups = sup_abs(reference, st.lp.dt, np.vstack([d["rows"] for d in data]))
@@ -534,13 +592,18 @@ def _cover(
         chan = d["sup"][:n].copy()
         if d["E"] is not None:
             chan += (rhos[1] - rhos[0]) / 2 * (d["sup"][n : 2 * n] + np.abs(d["E"] @ d["Gib"]) * hv)
+            if dmax > 0:  # the rho coupling of the disturbance's quasi-static part
+                chan += (rhos[1] - rhos[0]) / 2 * np.abs(d["E"] @ d["Gid"]) * dmax
         d["chan"] = chan
         k = 2 * n if d["E"] is not None else n
         d["static"] = d["sup"][k : k + 3] + np.array([abs(c @ d["Gib"]) * hv for c in st.statics])
+        if dmax > 0:
+            d["static"] = d["static"] + np.array([abs(c @ d["Gid"]) * dmax for c in st.statics])
         d["step_ref"] = d["sup"][k + 3 :]
     chan = np.max([d["chan"] for d in data], axis=0)
     hb = np.max([d["hyst"] for d in data], axis=0)
-    W = np.concatenate([chan, [hb[1], hb[2], noise_max]])
+    rem = disturbance_remainder(max(d["a3"] for d in data), st.dist[1], st.lp.dt)
+    W = np.concatenate([chan, [hb[1], hb[2], noise_max, dstep], rem])
     input_bounds = {
         "state_channels": chan.tolist(),
         "x3": float(hb[0]),
@@ -548,7 +611,13 @@ def _cover(
         "dh": float(hb[2]),
         "noise": noise_max,
     }
-    return hb, W, input_bounds
+    if dmax > 0 or dstep > 0:
+        input_bounds["disturbance"] = {
+            "input_max": dmax,
+            "step": dstep,
+            "within_sample": rem.tolist(),
+        }
+    return np.concatenate([hb, rem]), W, input_bounds
 
 
 @dataclass
@@ -650,11 +719,13 @@ def _input_step(st: _Setup, data: list[dict], dyn, hb: np.ndarray, noise_max: fl
     """Bound on ``|u_{k+1} - u_k|`` in steady state, over every plant and rho end.
 
     ``u_{k+1} - u_k = v' z_k + cu' B s_k + su' (s_{k+1} - s_k)`` with
-    ``v = (A - I)' cu``, ``z = z~ + G^-1 w_slow`` and ``x3_{k+1} - x3_k = j_k``.
+    ``v = (A - I)' cu``, ``z = z~ + G^-1 w_slow`` and ``x3_{k+1} - x3_k = j_k``;
+    the disturbance acts on the plant only (``su`` has no entry for it).
     """
     cu, su, n = st.cu, st.su, st.n
     worst = 0.0
     j_, dh_ = float(hb[1]), float(hb[2])
+    dmax, (r1, r2) = st.dist[0], (float(hb[3]), float(hb[4]))
     for d in data:
         Gib, hv = d["Gib"], d["hyst"][0]
         for (A, B), ref in zip(d["mats"], d["step_ref"], strict=True):
@@ -668,6 +739,12 @@ def _input_step(st: _Setup, data: list[dict], dyn, hb: np.ndarray, noise_max: fl
                 + (abs(cu @ B[:, 7]) + 2 * abs(su[7])) * dh_
                 + (abs(cu @ B[:, 8]) + 2 * abs(su[8])) * noise_max
             )
+            if dmax > 0 or r1 > 0:
+                total += (
+                    abs(v @ d["Gid"] + cu @ B[:, 9]) * dmax
+                    + abs(cu @ B[:, 10]) * r1
+                    + abs(cu @ B[:, 11]) * r2
+                )
             worst = max(worst, total)
     return worst
 
@@ -741,6 +818,12 @@ def _conclude(
             "assumption: this certificate bounds the loop's own input rate only by "
             f"{step / dt:.4g} {params.input_unit}/s)"
         )
+        if st.dist != (0.0, 0.0):
+            unit = params.input_unit
+            status += (
+                f", and an input disturbance |d| <= {st.dist[0]:.4g} {unit}, |d'| <= "
+                f"{st.dist[1]:.4g} {unit}/s on the plant"
+            )
     else:
         status = (
             f"not certified: the solver's P failed the outside check ({worst.name}: "

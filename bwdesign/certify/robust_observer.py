@@ -39,6 +39,18 @@ homogeneous part uses only model matrices; the box enters through the bounded in
   other initial state it holds after the plant's own transient ``Phi^k x(0)`` has
   died out.
 
+An input disturbance (``disturbance=DisturbanceBound(input_max, rate_max)``: the
+plant's linear part sees ``u + d``, ``|d| <= input_max``, ``|d'| <= rate_max``; the
+observer, its hysteresis copy and the plant's hysteresis see ``u``) changes the error
+step by ``(I - K C)[m(u + d) - gm d - r]``: the mismatch is bounded as above for the
+input ``v = u + d`` (range widened by ``input_max``, increments ``|dv| <= udot_max dt +
+rate_max dt``), ``gm d`` is the model's input column times ``input_max``, and ``r`` (a
+``d`` moving within the sample, :func:`~bwdesign.certify.ellipsoid.disturbance_remainder`)
+enters directly and through the plant's later mismatch (the l1 norm of ``dPhi
+Phi^(i-1)``). These add to the ``m1``, ``m2`` channels; with no disturbance they are 0.
+There is no slow/fast split here (no reference, no integrator): ``d`` is an arbitrary
+bounded input for this certificate, which keeps it simple and conservative.
+
 Certificate
 -----------
 One quadratic ``V = e'Pe`` for both ends of ``rho`` (common, because ``rho_k`` changes
@@ -67,14 +79,20 @@ from scipy.linalg import matrix_balance, solve_discrete_lyapunov
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
-from ..model.uncertainty import UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from ..observers.gains import as_gains, check_gains, discrete_gains
-from ..validate import NONNEGATIVE, SIGNAL, UDOT_MAX, integer, real
+from ..validate import NONNEGATIVE, SEED, SIGNAL, UDOT_MAX, integer, real
 from .checks import rho_interval
-from .ellipsoid import jump_mismatch, schur_min_eig, search_log_contraction
+from .ellipsoid import (
+    disturbance_remainder,
+    jump_mismatch,
+    schur_min_eig,
+    search_log_contraction,
+)
 from .results import CONTRACTION, Margin
 
 __all__ = [
+    "BoxSampling",
     "RobustObserverCertificate",
     "RobustObserverProblem",
     "certify_robust_observer",
@@ -83,6 +101,51 @@ __all__ = [
 ]
 
 _C = np.array([1.0, 0.0, 0.0])
+
+
+@dataclass(frozen=True)
+class BoxSampling:
+    """The seeded interior points of the box a robust observer certificate adds to its corners.
+
+    Parameters
+    ----------
+    interior_samples : int
+        Interior points (``>= 0``) whose input bounds are included.
+    seed : int
+        Seed of ``numpy.random.default_rng`` that draws them.
+    """
+
+    interior_samples: int = 16
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        n = integer(self.interior_samples, "interior_samples", within=NONNEGATIVE)
+        object.__setattr__(self, "interior_samples", n)
+        object.__setattr__(self, "seed", integer(self.seed, "seed", within=SEED))
+
+    def points(self, uncertainty: UncertaintyBox, params: BoucWenParams) -> list[BoucWenParams]:
+        """The interior plants (:meth:`UncertaintyBox.sample` with this seed)."""
+        rng = np.random.default_rng(self.seed)
+        return uncertainty.sample(params, rng, self.interior_samples)
+
+
+def _sampling(sampling: Any) -> BoxSampling:
+    if sampling is None:
+        return BoxSampling()
+    if not isinstance(sampling, BoxSampling):
+        raise InputError(f"sampling must be a BoxSampling or None, got {type(sampling).__name__}")
+    return sampling
+
+
+def _disturbance(disturbance: Any) -> tuple[float, float]:
+    """``(input_max, rate_max)`` of the input disturbance, ``(0, 0)`` for none."""
+    if disturbance is None:
+        return (0.0, 0.0)
+    if not isinstance(disturbance, DisturbanceBound):
+        raise InputError(
+            f"disturbance must be a DisturbanceBound or None, got {type(disturbance).__name__}"
+        )
+    return (disturbance.input_max, disturbance.rate_max)
 
 
 @dataclass(frozen=True)
@@ -189,15 +252,17 @@ def _response_l1(
 
 
 def _mismatch_bound(
-    model: BoucWenParams, tp: BoucWenParams, dt: float, u_lo: float, u_hi: float, du: float
+    model: BoucWenParams, tp: BoucWenParams, dt: float, u_range: tuple[float, float], du, dv
 ) -> np.ndarray:
     """Bound of ``|m|`` (rows 1, 2) for plant ``tp`` over the input range (module doc).
 
     Per component the smaller of two valid bounds: the amplitude one ``|m_c| + l1(h^u)
     u_r + l1(h^w) h_max`` and the rate one (summation by parts, ``S = sum h``):
-    ``|S^u u_c| + |S^u| u_r + |S^w| h_max + l1(S - S_i)^u |du| + l1(S - S_i)^w |dw|``
-    with ``|dw| <= (alpha + (|beta| + |gamma|) h_max) |du|`` the plant's jump.
+    ``|S^u u_c| + |S^u| u_r + |S^w| h_max + l1(S - S_i)^u |dv| + l1(S - S_i)^w |dw|``
+    with ``|dw| <= (alpha + (|beta| + |gamma|) h_max) |du|`` the plant's jump. ``u_range``
+    and ``dv`` are of the input the plant's linear part sees (``u + d``), ``du`` of ``u``.
     """
+    u_lo, u_hi = u_range
     zm, zv = discretize(model, dt), discretize(tp, dt)
     Phim, Phiv = np.asarray(zm.F)[:2, :2], np.asarray(zv.F)[:2, :2]
     bwm, bwv = np.asarray(zm.F)[:2, 2], np.asarray(zv.F)[:2, 2]
@@ -220,7 +285,7 @@ def _mismatch_bound(
         np.abs(Su * uc)
         + np.abs(Su) * ur
         + np.abs(Sw) * hv
-        + du * _response_l1(Phiv, R @ buv, dPhi, zero, w0)
+        + dv * _response_l1(Phiv, R @ buv, dPhi, zero, w0)
         + dw * _response_l1(Phiv, R @ bwv, dPhi, zero, w0)
     )
     return np.minimum(amplitude, rate)
@@ -248,8 +313,8 @@ def _problem(
     udot_max: float,
     input_range: Any,
     noise_max: float,
-    interior_samples: int,
-    seed: int,
+    sampling: Any,
+    disturbance: Any,
 ) -> RobustObserverProblem:
     require_bounded(params)
     udot_max = real(udot_max, "udot_max (V/s)", within=UDOT_MAX)
@@ -265,9 +330,10 @@ def _problem(
     u_hi = real(u_hi, "input_range u_hi (V)", within=SIGNAL)
     if not u_lo < u_hi:
         raise InputError(f"input_range must be finite with u_lo < u_hi, got {input_range!r}")
-    interior_samples = integer(interior_samples, "interior_samples", within=NONNEGATIVE)
+    sampling = _sampling(sampling)
+    dist = _disturbance(disturbance)
     vertices = uncertainty.vertices(params)
-    interior = uncertainty.sample(params, np.random.default_rng(seed), interior_samples)
+    interior = sampling.points(uncertainty, params)
     rho = rho_interval(params, udot_max, dt)
     base = {
         "n_vertices": len(vertices),
@@ -290,7 +356,10 @@ def _problem(
     per = []
     for tp in [*vertices, *interior]:
         dh = jump_mismatch(params, tp, du)
-        per.append(np.concatenate([[dh], _mismatch_bound(params, tp, dt, u_lo, u_hi, du)]))
+        m = _mismatch_bound(params, tp, dt, (u_lo - dist[0], u_hi + dist[0]), du, du + dist[1] * dt)
+        if dist != (0.0, 0.0):
+            m = m + _disturbance_terms(params, tp, dt, dist)
+        per.append(np.concatenate([[dh], m]))
     per = np.array(per)
     nv = len(vertices)
     W = per.max(axis=0)
@@ -301,7 +370,8 @@ def _problem(
         Bw=Bw,
         noise=noise_max,
         rho=rho,
-        input_bounds={"dh": float(W[0]), "m1": float(W[1]), "m2": float(W[2]), "noise": noise_max},
+        input_bounds={"dh": float(W[0]), "m1": float(W[1]), "m2": float(W[2]), "noise": noise_max}
+        | ({"disturbance": {"input_max": dist[0], "rate_max": dist[1]}} if any(dist) else {}),
         base=base,
         details={
             "rho_interval": list(rho),
@@ -312,6 +382,26 @@ def _problem(
     )
 
 
+def _disturbance_terms(
+    model: BoucWenParams, tp: BoucWenParams, dt: float, dist: tuple[float, float]
+) -> np.ndarray:
+    """What the input disturbance adds to ``|m|`` beyond the widened input (module doc).
+
+    ``gm d`` (the model's input column: the plant's ``gv d`` and the mismatch's ``(gm -
+    gv) d`` together), the within-sample remainder ``r`` directly and through the
+    plant's later mismatch ``sum_i dPhi Phi^(i-1) r``.
+    """
+    zm, zv = discretize(model, dt), discretize(tp, dt)
+    Phiv, dPhi = np.asarray(zv.F)[:2, :2], (np.asarray(zm.F) - np.asarray(zv.F))[:2, :2]
+    r = disturbance_remainder(tp.a3, dist[1], dt)
+    out = np.abs(np.asarray(zm.g)[:2]) * dist[0] + r
+    if dist[1] > 0:
+        w0 = math.sqrt(tp.a1)
+        for j in range(2):
+            out = out + r[j] * _response_l1(Phiv, np.eye(2)[j], dPhi, np.zeros(2), w0)
+    return out
+
+
 def robust_observer_problem(
     params: BoucWenParams,
     *,
@@ -320,8 +410,8 @@ def robust_observer_problem(
     udot_max: float,
     input_range: tuple[float, float],
     noise_max: float = 0.0,
-    interior_samples: int = 16,
-    seed: int = 0,
+    sampling: BoxSampling | None = None,
+    disturbance: DisturbanceBound | None = None,
 ) -> RobustObserverProblem:
     """The gain-free part of :func:`certify_robust_observer`'s problem, checked.
 
@@ -337,8 +427,8 @@ def robust_observer_problem(
         udot_max=udot_max,
         input_range=input_range,
         noise_max=noise_max,
-        interior_samples=interior_samples,
-        seed=seed,
+        sampling=sampling,
+        disturbance=disturbance,
     )
 
 
@@ -398,7 +488,7 @@ def _certify_K(
         return _not(pb, pb.refused, math.nan)
     if not math.isfinite(rho_hi):
         return _not(pb, "the model's jump-map slope interval is unbounded", math.nan)
-    if not all(math.isfinite(v) for v in pb.input_bounds.values()):
+    if not all(math.isfinite(pb.input_bounds[k]) for k in ("dh", "m1", "m2", "noise")):
         return _not(
             pb,
             "an input bound is infinite (the hysteresis mismatch at this input rate: "
@@ -492,7 +582,7 @@ def _certify_K(
             f"certified over {nb['n_vertices']} corners (+{nb['n_interior']} interior points) "
             f"for u in [{nb['input_range'][0]:g}, {nb['input_range'][1]:g}]: steady "
             f"|x1hat - x1| <= {bounds['x1']:.4g}, |x3hat - x3| <= {bounds['x3']:.4g} "
-            f"(length unit), convergence >= {decay:.4g} 1/s"
+            f"(length unit), convergence >= {decay:.4g} 1/s" + _disturbance_note(pb)
         ),
         decay=decay,
         estimation_bound=bounds["x1"],
@@ -506,6 +596,16 @@ def _certify_K(
     )
 
 
+def _disturbance_note(pb: RobustObserverProblem) -> str:
+    dist = pb.input_bounds.get("disturbance")
+    if dist is None:
+        return ""
+    return (
+        f", with an input disturbance |d| <= {dist['input_max']:.4g}, |d'| <= "
+        f"{dist['rate_max']:.4g} /s (input unit) on the plant"
+    )
+
+
 def certify_robust_observer(
     params: BoucWenParams,
     gains: Any,
@@ -515,9 +615,9 @@ def certify_robust_observer(
     udot_max: float,
     input_range: tuple[float, float],
     noise_max: float = 0.0,
-    interior_samples: int = 16,
-    seed: int = 0,
+    sampling: BoxSampling | None = None,
     a: float | None = None,
+    disturbance: DisturbanceBound | None = None,
 ) -> RobustObserverCertificate:
     """Certify the sampled PHSO's estimation error over every plant in an uncertainty box.
 
@@ -538,11 +638,15 @@ def certify_robust_observer(
         ``(u_lo, u_hi)``: the inputs (V) the plant may be driven with.
     noise_max : float
         Sensor noise bound ``|n| <= noise_max`` (length unit).
-    interior_samples : int
-        Seeded interior points of the box whose input bounds are included.
-    seed : int
+    sampling : BoxSampling, optional
+        The seeded interior points of the box whose input bounds are included
+        (default ``BoxSampling()``: 16 points, seed 0).
     a : float, optional
         Contraction per sample in ``(0, 1)``; default: searched for the smallest x1 bound.
+    disturbance : DisturbanceBound, optional
+        A slowly varying input-equivalent disturbance on the plant (``x2' = ... + a3 (u
+        + d)``, ``|d| <= input_max``, ``|d'| <= rate_max``; the observer does not see it):
+        the plant's linear part sees ``u + d``; see the module doc. ``None``: none.
 
     Returns
     -------
@@ -552,7 +656,7 @@ def certify_robust_observer(
     K = discrete_gains(params, check_gains(params, gains), dt)
     pb = robust_observer_problem(
         params, dt=dt, uncertainty=uncertainty, udot_max=udot_max, input_range=input_range,
-        noise_max=noise_max, interior_samples=interior_samples, seed=seed,
+        noise_max=noise_max, sampling=sampling, disturbance=disturbance,
     )  # fmt: skip
     return _certify_K(pb, np.asarray(K, float), a)
 
@@ -566,9 +670,9 @@ def certify_robust_observer_discrete(
     udot_max: float,
     input_range: tuple[float, float],
     noise_max: float = 0.0,
-    interior_samples: int = 16,
-    seed: int = 0,
+    sampling: BoxSampling | None = None,
     a: float | None = None,
+    disturbance: DisturbanceBound | None = None,
 ) -> RobustObserverCertificate:
     """:func:`certify_robust_observer` of the discrete gain ``K`` itself (as ``certify_discrete``).
 
@@ -578,6 +682,6 @@ def certify_robust_observer_discrete(
     K = np.asarray(as_gains(K, "discrete gains K"), float)
     pb = robust_observer_problem(
         params, dt=dt, uncertainty=uncertainty, udot_max=udot_max, input_range=input_range,
-        noise_max=noise_max, interior_samples=interior_samples, seed=seed,
+        noise_max=noise_max, sampling=sampling, disturbance=disturbance,
     )  # fmt: skip
     return _certify_K(pb, K, a)

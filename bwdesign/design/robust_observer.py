@@ -18,6 +18,7 @@ from ..certify.checks import continuous_equivalent
 from ..certify.ellipsoid import search_log_contraction
 from ..certify.results import OUTPUT_ROW
 from ..certify.robust_observer import (
+    BoxSampling,
     RobustObserverCertificate,
     RobustObserverProblem,
     certify_robust_observer,
@@ -27,7 +28,7 @@ from ..certify.robust_observer import (
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams
 from ..model.plant import check_sample_time
-from ..model.uncertainty import UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from ..validate import POLE_RADIUS, real
 
 __all__ = ["RobustObserverSynthesis", "synthesize_robust_observer"]
@@ -93,8 +94,8 @@ def synthesize_robust_observer(
     noise_max: float = 0.0,
     target: str = "x3",
     pole_radius: float | None = None,
-    interior_samples: int = 16,
-    seed: int = 0,
+    sampling: BoxSampling | None = None,
+    disturbance: DisturbanceBound | None = None,
 ) -> RobustObserverSynthesis:
     """Discrete PHSO gains minimising the certified steady estimation-error bound over a box.
 
@@ -112,7 +113,7 @@ def synthesize_robust_observer(
 
     Parameters
     ----------
-    params, dt, uncertainty, udot_max, input_range, noise_max, interior_samples, seed
+    params, dt, uncertainty, udot_max, input_range, noise_max, sampling, disturbance
         As :func:`certify_robust_observer`.
     target : {"x3", "x1"}
         The estimation error whose certified bound is minimised.
@@ -132,8 +133,8 @@ def synthesize_robust_observer(
         "udot_max": udot_max,
         "input_range": input_range,
         "noise_max": noise_max,
-        "interior_samples": interior_samples,
-        "seed": seed,
+        "sampling": sampling,
+        "disturbance": disturbance,
     }
     pb = robust_observer_problem(params, **opts)
     disk = None

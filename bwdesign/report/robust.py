@@ -40,6 +40,16 @@ def robust_section(doc: Document, study: Study) -> None:
         f"loop keeps an input-rate envelope: the stage's |u'| <= {udot_max:.4g} {iu}/s, or "
         "1.1 x the fastest input rate simulated at the corners when that is faster."
     )
+    dist = part.disturbance
+    if dist is not None:
+        f = dist.rate_max / (2 * math.pi * dist.input_max) if dist.input_max > 0 else 0.0
+        doc.para(
+            f"Assumed beside the box ([uncertainty.disturbance], {dist.source}): an "
+            f"input-equivalent disturbance d on the plant with |d| <= {dist.input_max:.4g} "
+            f"{iu} and |d'| <= {dist.rate_max:.4g} {iu}/s, certified as a slow input; every "
+            f"corner is simulated with d = +-{dist.input_max:.4g} sin(2 pi {f:.4g} Hz t) and "
+            f"a ramp at +-{dist.rate_max:.4g} {iu}/s to +-{dist.input_max:.4g} {iu}, held."
+        )
     for lp in loops:
         rc = lp.certificate
         name = _OBSERVERS[lp.observer]

@@ -42,7 +42,7 @@ from .kernel import (
     discrete_observer_gains,
     hysteresis_increment_batch,
 )
-from .run import Run, diverged, prepare, resolve_window
+from .run import Run, disturbance_samples, diverged, prepare, resolve_window
 
 __all__ = ["BatchResult", "simulate_batch", "hysteresis_increment_batch"]
 
@@ -157,6 +157,7 @@ def simulate_batch(
     noise_std: Any = 0.0,
     seeds: Any = 0,
     window: Any = None,
+    input_disturbance: Any = None,
 ) -> BatchResult:
     """Run the sampled loop ``loop`` for every true parameter set in ``true_params``.
 
@@ -178,6 +179,9 @@ def simulate_batch(
         Noise seed per scenario (``numpy.random.default_rng``).
     window : (float, float), optional
         Metrics window (s), as for :func:`simulate`.
+    input_disturbance : callable or array_like, optional
+        The plant's input disturbance, as for :func:`simulate`: common to every
+        scenario (``n`` samples) or one row per scenario (shape ``(N, n)``).
 
     Returns
     -------
@@ -203,7 +207,8 @@ def simulate_batch(
     in_win = (t >= win[0] - 1e-12) & (t <= win[1] + 1e-12)
     if not np.any(in_win):
         raise InputError(f"window {win} holds no sample")
-    acc = _run_batch(run, in_win, noise_std, seeds)
+    dist = disturbance_samples(input_disturbance, run, N)
+    acc = _run_batch(run, in_win, noise_std, seeds, dist)
     stable = acc["alive"].copy()
     count = acc["count"]
     settings = {
@@ -237,7 +242,7 @@ def simulate_batch(
     )
 
 
-def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds: np.ndarray) -> dict:
+def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds, dist) -> dict:
     """The loop for every scenario at once: :mod:`bwdesign.sim.kernel`'s step on arrays."""
     loop, n, N = run.loop, run.n, len(run.true_params)
     dt, limit = loop.dt, loop.divergence_limit
@@ -246,6 +251,7 @@ def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds: np.nd
     c = LoopConstants(loop, discrete_observer_gains(loop), ref, ARRAY)
     T = _true_matrices(list(run.true_params), dt)
     c.set_plants(T)
+    c.dist = dist
     start = run.start
     s = LoopState(
         [np.full(N, float(v)) for v in start.x0],

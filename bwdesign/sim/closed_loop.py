@@ -23,7 +23,7 @@ from ..observers.spec import ObserverSpec
 from ..validate import SEED, Range, integer, real
 from .kernel import SCALAR, LoopConstants, LoopState, advance, correct
 from .result import SimulationResult
-from .run import Run, diverged, finish, prepare
+from .run import Run, disturbance_samples, diverged, finish, prepare
 
 __all__ = ["simulate", "make_observer", "NOISE_STD"]
 
@@ -129,6 +129,7 @@ def simulate(
     seed: int = 0,
     window: Any = None,
     fast: bool = True,
+    input_disturbance: Any = None,
 ) -> SimulationResult:
     """Simulate the sampled-data tracking loop ``loop`` (see :mod:`bwdesign.sim`).
 
@@ -154,6 +155,11 @@ def simulate(
         step of :mod:`bwdesign.sim.kernel` on Python floats; ``fast=False`` (and the
         UKF, custom observers) call the observer and controller objects, which gives
         the same numbers to rounding.
+    input_disturbance : callable or array_like, optional
+        A disturbance ``d`` added to the plant's input (its linear part: ``x2' = ... +
+        a3 (u + d)``; the hysteresis, the observer and the law see ``u`` only), held
+        over each sample: ``d(t)`` called with the sample times, or the ``n`` samples
+        (input unit). See :class:`~bwdesign.DisturbanceBound`.
 
     Returns
     -------
@@ -195,16 +201,19 @@ def simulate(
     rng = np.random.default_rng(seed)
     noise = noise_std * rng.standard_normal(run.n) if noise_std > 0 else np.zeros(run.n)
     ref = run.reference_terms()
+    dist = disturbance_samples(input_disturbance, run)
     # the kernel's switches come from the spec's kind: a custom object (even of a built-in
     # class, with its own u_prev) runs on its own methods
     builtin = loop.observer.kind in _BUILTIN
     path = "fast" if (fast and builtin) else "generic"
-    rec = (_run_fast if path == "fast" else _run_generic)(run, loop, obs, ctrl, ref, noise)
+    rec = (_run_fast if path == "fast" else _run_generic)(run, loop, obs, ctrl, ref, noise, dist)
     m = rec["m"]
     rec = {k: (v[:m] if isinstance(v, np.ndarray) else v) for k, v in rec.items()}
     rec["t"], rec["x_d"] = run.t[:m], ref[0][:m]
     settings = _settings(run, loop, obs, ctrl, noise_std, seed, true_params is not None)
     settings["path"] = path
+    if dist is not None:
+        settings["input_disturbance_max"] = float(np.max(np.abs(dist)))
     return finish(run, rec, window=window, mode="sampled", settings=settings)
 
 
@@ -240,7 +249,7 @@ def _estimate(obs: Any) -> np.ndarray:
     return np.asarray(obs.x if lumped is None else lumped, dtype=float)
 
 
-def _run_generic(run: Run, loop: ClosedLoop, obs, ctrl, ref, noise) -> dict[str, Any]:
+def _run_generic(run: Run, loop: ClosedLoop, obs, ctrl, ref, noise, dist) -> dict[str, Any]:
     """The loop on the observer and controller objects (any observer)."""
     xd_all, vd_all, ad_all = ref
     n, dt, limit = run.n, loop.dt, loop.divergence_limit
@@ -268,7 +277,8 @@ def _run_generic(run: Run, loop: ClosedLoop, obs, ctrl, ref, noise) -> dict[str,
                     u_next = ctrl(xh, (xd_all[k], vd_all[k], ad_all[k]), **jkw)
             U[k] = applied
             h = hysteresis_increment(tp, float(x[2]), up, applied)
-            x = zt.F @ np.array([x[0], x[1], h]) + zt.g * applied
+            ud = applied if dist is None else applied + dist[k]  # kernel.advance's u + d
+            x = zt.F @ np.array([x[0], x[1], h]) + zt.g * ud
             try:
                 obs.predict(applied)
             except InputError:
@@ -287,12 +297,13 @@ def _run_generic(run: Run, loop: ClosedLoop, obs, ctrl, ref, noise) -> dict[str,
     return dict(x=X, xhat=XH, u=U, z=Z, m=m, stable=stable, status=status)
 
 
-def _run_fast(run: Run, loop: ClosedLoop, obs, ctrl, ref, noise) -> dict[str, Any]:
+def _run_fast(run: Run, loop: ClosedLoop, obs, ctrl, ref, noise, dist) -> dict[str, Any]:
     """The loop on Python floats: :mod:`bwdesign.sim.kernel`'s step, one plant."""
     n, dt, limit = run.n, loop.dt, loop.divergence_limit
     tp = run.true_params[0]
     c = LoopConstants(loop, obs.K, ref, SCALAR)
     c.set_plant(tp, dt)
+    c.dist = dist
     c.ki, c.cdt = float(ctrl.ki), float(getattr(ctrl, "dt", dt))
     xh = [float(v) for v in obs.x]
     s = LoopState(

@@ -2,15 +2,40 @@
 
 from __future__ import annotations
 
+from typing import Any
+
+import numpy as np
+
 from ..control.loop import ClosedLoop
 from ..model.references import Reference
-from ..model.uncertainty import UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from .batch import BatchResult, simulate_batch
 
-__all__ = ["simulate_corners"]
+__all__ = ["simulate_corners", "disturbance_signals"]
 
 
-def simulate_corners(loop: ClosedLoop, box: UncertaintyBox, reference: Reference) -> BatchResult:
+def disturbance_signals(bound: DisturbanceBound, t: np.ndarray) -> np.ndarray:
+    """The worst-case input disturbances of a bound at the times ``t``, shape ``(4, len(t))``.
+
+    ``+-input_max sin(2 pi f t)`` at the rate limit (``2 pi f input_max = rate_max``)
+    and a ramp at ``+-rate_max`` from 0 to ``+-input_max``, then held (a constant
+    ``+-input_max`` when ``rate_max = 0``).
+    """
+    dm, rate = bound.input_max, bound.rate_max
+    t = np.asarray(t, dtype=float)
+    if dm == 0:
+        return np.zeros((4, t.size))
+    sine = dm * np.sin(rate / dm * t)  # 2 pi f = rate_max / input_max
+    ramp = np.minimum(rate * t, dm) if rate > 0 else np.full(t.size, dm)
+    return np.array([sine, -sine, ramp, -ramp])
+
+
+def simulate_corners(
+    loop: ClosedLoop,
+    box: UncertaintyBox,
+    reference: Reference,
+    disturbance: DisturbanceBound | None = None,
+) -> BatchResult:
     """``loop`` simulated at every corner of ``box`` (its start: usually on the reference).
 
     Three reference periods (0.5 s at least), statistics over the last two; or, for a
@@ -18,7 +43,8 @@ def simulate_corners(loop: ClosedLoop, box: UncertaintyBox, reference: Reference
     from its first move on, so that every move of the reference is simulated and
     measured, as the certificate covers every one. ``input_rate_max`` (over the same
     window) is what :func:`bwdesign.design.certified_envelope` compares with the
-    envelope a robust certificate assumes.
+    envelope a robust certificate assumes. With a ``disturbance`` every corner runs
+    each of :func:`disturbance_signals` (four scenarios per corner).
     """
     if reference.period is not None:
         duration, window = max(3 * reference.period, 0.5), None
@@ -27,6 +53,13 @@ def simulate_corners(loop: ClosedLoop, box: UncertaintyBox, reference: Reference
         duration = max(settles + 1.0, 1.0)
         moves = [float(b) for b in reference.breakpoints(0.0, settles)]
         window = (min(moves, default=0.0), duration) if settles > 0 else None
+    corners = box.vertices(loop.model)
+    dist: Any = None
+    if disturbance is not None and not disturbance.none:
+        t = np.arange(int(round(duration / loop.dt))) * loop.dt
+        sig = disturbance_signals(disturbance, t)
+        corners = [tp for tp in corners for _ in sig]
+        dist = np.tile(sig, (len(corners) // len(sig), 1))
     return simulate_batch(
-        loop, reference, box.vertices(loop.model), duration=duration, window=window
+        loop, reference, corners, duration=duration, window=window, input_disturbance=dist
     )

@@ -11,8 +11,10 @@ scenario of a batch runs the scalar loop's operations in the same order.
 Per sample ``k`` (see :mod:`bwdesign.sim`)::
 
     correct(z_k)   posterior estimate (the PHDO's law sees x3hat + dhat)
-    advance(k)     u_k from the law (or the delayed one), plant jump and ZOH step,
-                   observer prediction with the applied input, next delayed input
+    advance(k)     u_k from the law (or the delayed one), plant jump and ZOH step
+                   (its linear part driven by u_k + d_k when the run has an input
+                   disturbance), observer prediction with the applied input, next
+                   delayed input
 """
 
 from __future__ import annotations
@@ -106,7 +108,7 @@ class LoopConstants:
         "K1", "K2", "K3", "K4", "four", "phso", "m11", "m12", "m13", "m21", "m22", "m23",
         "mg1", "mg2", "p11", "p12", "p13", "p21", "p22", "p23", "pg1", "pg2", "kx1", "kx2",
         "kx3", "ki", "cdt", "integral", "ulo", "uhi", "clip", "limits", "jump", "ff", "xd",
-        "delay", "compensate", "plant_h", "model_h", "model", "ops",
+        "delay", "compensate", "plant_h", "model_h", "model", "ops", "dist",
     )  # fmt: skip
 
     def __init__(self, loop: ClosedLoop, K: Any, ref: tuple[Any, Any, Any], ops: Ops):
@@ -133,6 +135,9 @@ class LoopConstants:
         self.delay, self.compensate = loop.delay, loop.compensate_delay
         self.model = loop.model
         self.ops = ops
+        #: the plant's input disturbance per sample (held over it), or None:
+        #: a list of floats for one run, an (n, N) array for a batch
+        self.dist: Any = None
         m = loop.model
         if ops.batch:
             hb = hysteresis_increment_batch
@@ -218,8 +223,10 @@ def advance(c: LoopConstants, s: LoopState, k: int) -> tuple[Any, Any]:
     up = s.up
     x1, x2 = s.x1, s.x2
     hh = c.plant_h(s.x3, up, applied)
-    s.x1 = c.p11 * x1 + c.p12 * x2 + c.p13 * hh + c.pg1 * applied
-    s.x2 = c.p21 * x1 + c.p22 * x2 + c.p23 * hh + c.pg2 * applied
+    # the plant's linear part sees u + d (d held over the sample); its hysteresis sees u
+    ud = applied if c.dist is None else applied + c.dist[k]
+    s.x1 = c.p11 * x1 + c.p12 * x2 + c.p13 * hh + c.pg1 * ud
+    s.x2 = c.p21 * x1 + c.p22 * x2 + c.p23 * hh + c.pg2 * ud
     s.x3 = hh
     h1, h2, hd = s.h1, s.h2, s.hd
     g3 = c.model_h(s.h3, up, applied) if c.phso else s.h3

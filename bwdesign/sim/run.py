@@ -26,7 +26,15 @@ from ..validate import Range, below_nyquist, real
 from .metrics import steady_state_window, tracking_metrics
 from .result import SimulationResult
 
-__all__ = ["Run", "prepare", "finish", "diverged", "resolve_window", "DURATION"]
+__all__ = [
+    "Run",
+    "prepare",
+    "finish",
+    "diverged",
+    "resolve_window",
+    "disturbance_samples",
+    "DURATION",
+]
 
 #: Supported run lengths (s).
 DURATION = Range(0.0, 1e7, lo_open=True, unit="s")
@@ -133,6 +141,32 @@ def prepare(
         start=loop.initial(reference),
         true_params=tuple(plants),
     )
+
+
+def disturbance_samples(value: Any, run: Run, scenarios: int | None = None) -> Any:
+    """The plant's input disturbance ``d_k`` per sample, held over the sample (or ``None``).
+
+    ``value``: ``None``; a callable ``d(t)`` of the sample times ``run.t`` (s); or an
+    array of the ``n`` samples. For a batch (``scenarios = N``) the callable or array may
+    also give one row per scenario, shape ``(N, n)``; the result is then ``(n, N)``.
+    One run gets a list of ``n`` floats. In the input unit.
+    """
+    if value is None:
+        return None
+    n = run.n
+    try:
+        d = np.asarray(value(run.t) if callable(value) else value, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise InputError(f"input_disturbance must give numbers: {err}") from None
+    shapes = [(n,)] if scenarios is None else [(n,), (scenarios, n)]
+    if d.shape not in shapes:
+        want = " or ".join(str(s) for s in shapes)
+        raise InputError(f"input_disturbance must have shape {want} (samples), got {d.shape}")
+    if not np.all(np.isfinite(d)):
+        raise InputError("input_disturbance must be finite at every sample")
+    if scenarios is None:
+        return d.tolist()
+    return np.ascontiguousarray(np.broadcast_to(d, (scenarios, n)).T)
 
 
 def resolve_window(t: np.ndarray, reference: Reference, window: Any) -> tuple[float, float]:

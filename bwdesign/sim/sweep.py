@@ -44,7 +44,7 @@ from ..errors import BWDesignError, ConfigError, InputError, SweepError
 from ..extras import require
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
-from ..model.uncertainty import UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from ..observers.gains import gains_for_observer
 from ..observers.spec import ObserverSpec
 from ..validate import UDOT_MAX, Range, integer, real
@@ -52,6 +52,7 @@ from .batch import BATCH_OBSERVERS, simulate_batch
 
 __all__ = [
     "SweepSpec",
+    "scenario_disturbance",
     "SweepError",
     "METRIC_COLUMNS",
     "draw_scenarios",
@@ -125,6 +126,10 @@ class SweepSpec:
         The box the scenarios are drawn from (:func:`draw_scenarios`); checked
         against ``params`` here (:meth:`UncertaintyBox.check`). Default: empty,
         every parameter exact.
+    disturbance : DisturbanceBound, optional
+        An input disturbance on every scenario's plant (the stage's
+        ``[uncertainty.disturbance]``): scenario ``i`` runs
+        :func:`scenario_disturbance` seeded by its ``noise_seed``. None: none.
     """
 
     loop: ClosedLoop
@@ -136,6 +141,7 @@ class SweepSpec:
     udot_max: float | None = None
     envelope_source: str = ""
     box: UncertaintyBox = field(default_factory=UncertaintyBox)
+    disturbance: DisturbanceBound | None = None
 
     def loop_for(self, observer: str) -> ClosedLoop:
         """The loop with ``observer`` on the design gains (the PHDO on ``(l1, l2, 0, l3)``)."""
@@ -176,6 +182,8 @@ class SweepSpec:
         if not isinstance(self.box, UncertaintyBox):
             raise InputError(f"box must be an UncertaintyBox, got {self.box!r}")
         self.box.check(self.params)
+        if self.disturbance is not None and not isinstance(self.disturbance, DisturbanceBound):
+            raise InputError(f"disturbance must be a DisturbanceBound, got {self.disturbance!r}")
 
 
 def check_observers(observers: Sequence[str]) -> tuple[str, ...]:
@@ -363,6 +371,27 @@ def _true_params(params: BoucWenParams, cols: Mapping[str, np.ndarray]) -> list[
     ]
 
 
+def scenario_disturbance(bound: DisturbanceBound, seeds: Any, t: np.ndarray) -> np.ndarray:
+    """Seeded slowly varying input disturbances within ``bound``, one row per seed.
+
+    ``d_i(t) = input_max sin(2 pi f_i t + phi_i)`` with ``f_i`` uniform in ``[0,
+    rate_max / (2 pi input_max)]`` (so ``|d'| <= rate_max``) and ``phi_i`` uniform in
+    ``[0, 2 pi)``, drawn from ``numpy.random.default_rng([seed, 26])`` (a stream apart
+    from the scenario's noise). ``rate_max = 0`` gives a constant in ``[-input_max,
+    input_max]``.
+    """
+    t = np.asarray(t, dtype=float)
+    rows = np.zeros((len(seeds), t.size))
+    dm = bound.input_max
+    if dm == 0:
+        return rows
+    wmax = bound.rate_max / dm
+    for i, seed in enumerate(seeds):
+        u = np.random.default_rng([int(seed), 26]).random(2)
+        rows[i] = dm * np.sin(wmax * u[0] * t + 2 * np.pi * u[1])
+    return rows
+
+
 def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Run one chunk of scenarios for every observer of ``spec``: one row per pair.
 
@@ -372,6 +401,10 @@ def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.n
     spec.udot_max``; only when the spec names an envelope) and ``status``.
     """
     tps = _true_params(spec.params, cols)
+    dist = None
+    if spec.disturbance is not None and not spec.disturbance.none:
+        t = np.arange(int(round(spec.duration / spec.dt))) * spec.dt
+        dist = scenario_disturbance(spec.disturbance, cols["noise_seed"], t)
     out: dict[str, list[np.ndarray]] = {}
     for obs in spec.observers:
         res = simulate_batch(
@@ -381,6 +414,7 @@ def run_chunk(spec: SweepSpec, cols: Mapping[str, np.ndarray]) -> dict[str, np.n
             duration=spec.duration,
             noise_std=spec.noise_std,
             seeds=cols["noise_seed"],
+            input_disturbance=dist,
         )
         n = len(res)
         part = {k: np.asarray(cols[k]) for k in ("scenario", *MODEL_FIELDS, "noise_seed")}
@@ -606,6 +640,7 @@ def spec_from_config(
         udot_max=udot_max,
         envelope_source=source,
         box=box,
+        disturbance=getattr(config, "disturbance", None),
     )
 
 

@@ -25,6 +25,7 @@ from ..errors import InputError
 from ..model.config import StageConfig
 from ..model.envelope import Envelope
 from ..model.params import BoucWenParams
+from ..model.uncertainty import DisturbanceBound
 from ..sim.batch import BatchResult
 from ..sim.sweep import SweepSpec
 from .tiers import TierSynthesis
@@ -310,12 +311,17 @@ class RobustStudy:
     udot_max: float
     bounds: dict[str, tuple[float, float]]
     loops: tuple[RobustLoop, ...]
+    #: the stage's input disturbance the certificates assumed (None: none)
+    disturbance: DisturbanceBound | None = None
 
     def loop(self, observer: str) -> RobustLoop | None:
         return next((lp for lp in self.loops if lp.observer == observer), None)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"observers": {lp.observer: lp.to_dict() for lp in self.loops}}
+        doc: dict[str, Any] = {"observers": {lp.observer: lp.to_dict() for lp in self.loops}}
+        if self.disturbance is not None:
+            doc["disturbance"] = self.disturbance.to_dict()
+        return doc
 
 
 #: The observer update the firmware gains are for.

@@ -13,6 +13,11 @@ A robust certificate assumes the loop keeps ``|u'| <= udot_max`` and does not
 prove it: the corners are simulated first, and when their input moves faster than
 the stage's envelope the certificate is asked for
 :func:`bwdesign.design.certified_envelope` of their fastest rate.
+
+A stage with ``[uncertainty.disturbance]`` (``StageConfig.disturbance``) has it in
+the certificate (``certify_robust(..., disturbance=)``) and in the corners'
+simulation: each corner runs :func:`bwdesign.sim.corners.disturbance_signals` (a
+sine at the rate limit and a ramp-and-hold, both signs).
 """
 
 from __future__ import annotations
@@ -42,11 +47,12 @@ def robust_loop(
     box, ref = config.uncertainty, config.reference
     gains = tuning.observer_gains_for(observer)
     loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
-    sim = simulate_corners(loop, box, ref)
+    dist = config.disturbance if config.disturbance and not config.disturbance.none else None
+    sim = simulate_corners(loop, box, ref, dist)
     stable = bool(sim.stable.all())
     rate = float(np.nanmax(sim.input_rate_max)) if stable else math.nan
     env = certified_envelope(udot_max, rate) if stable else udot_max
-    rc = certify_robust(loop, uncertainty=box, udot_max=env, reference=ref)
+    rc = certify_robust(loop, uncertainty=box, udot_max=env, reference=ref, disturbance=dist)
     worst = float(np.nanmax(sim.maxe)) if stable else math.nan
     worst_est = np.nanmax(sim.estimation_maxe, axis=0) if stable else np.full(3, math.nan)
     ratio = rc.tracking_bound / worst if rc.holds and worst > 0 else None
@@ -72,6 +78,10 @@ def robust_study(config: StageConfig, tuning: DigitalTuning, udot_max: float) ->
     simulation, so the two compare the same loops.
     """
     loops = tuple(robust_loop(config, tuning, udot_max, obs) for obs in ROBUST_OBSERVERS)
+    dist = config.disturbance if config.disturbance and not config.disturbance.none else None
     return RobustStudy(
-        udot_max=udot_max, bounds=config.uncertainty.bounds(config.plant), loops=loops
+        udot_max=udot_max,
+        bounds=config.uncertainty.bounds(config.plant),
+        loops=loops,
+        disturbance=dist,
     )
