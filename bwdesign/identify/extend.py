@@ -172,6 +172,7 @@ def _screen(
     acf1, frac = residual_whiteness(r1)
     row = {"fit_train": pooled_fit(ys, models), "fit_heldout": None, "acf1": acf1}
     row["frac_out"] = frac
+    row["separable"] = share
     reason = ""
     if share < SEPARABLE:
         reason = (
