@@ -377,18 +377,7 @@ def identify(
         alternatives = _profile(fit, max_nfev, say)
     elif free[IW]:
         resonance_held, alternatives = _resonance(fit, records, prior, max_nfev, say)
-    ctx = make_context(
-        records=records,
-        valids=valids,
-        delay=delay,
-        free=fit.free,
-        refine=_refine,
-        max_nfev=max_nfev,
-        creep_taus=tuple(t for t in CREEP_TAUS if t <= fit.prob.duration),
-    )
-    model, extensions = select_extensions(fit.prob, fit.theta, fit.sol, ctx, say)
-    fit.nfev += ctx.nfev
-    fit.prob, fit.theta, fit.sol, delay = model.prob, model.theta, model.sol, model.delay
+    extensions, delay = _extend(fit, records, valids, delay, max_nfev, say)
     # intervals with the resonance free even when it is held: they must not pretend
     # that a resonance the record cannot see is known
     cov_free = fit.free.copy()
@@ -414,6 +403,27 @@ def identify(
         unexplained=details,
         seconds=time.perf_counter() - tic,
     )
+
+
+def _extend(
+    fit: _Fit, records: list, valids: list, delay: int, max_nfev: int, say
+) -> tuple[dict[str, Any], int]:
+    """Model extensions the records need (:mod:`bwdesign.identify.extend`), from the base
+    optimum; ``fit`` moves to the chosen model. Returns the extensions document and the
+    input delay of the chosen model."""
+    ctx = make_context(
+        records=records,
+        valids=valids,
+        delay=delay,
+        free=fit.free,
+        refine=_refine,
+        max_nfev=max_nfev,
+        creep_taus=tuple(t for t in CREEP_TAUS if t <= fit.prob.duration),
+    )
+    model, extensions = select_extensions(fit.prob, fit.theta, fit.sol, ctx, say)
+    fit.nfev += ctx.nfev
+    fit.prob, fit.theta, fit.sol = model.prob, model.theta, model.sol
+    return extensions, model.delay
 
 
 def _records(data: Any, what: str) -> list[IdentificationData]:
