@@ -395,6 +395,10 @@ def identify(
     )
     result = build_result(fit.prob, outcome, data=records, validation=valids, name=name)
     bound, coverage, details = unexplained(result, fit.theta, records, valids, delay)
+    if valids and not extensions["chosen"]:
+        # the base model is the fit: its held-out fit is the validation fit
+        extensions["base"]["fit_heldout"] = result.fit_percent["validation"]
+        extensions["final"]["fit_heldout"] = result.fit_percent["validation"]
     return replace(
         result,
         extensions=extensions,

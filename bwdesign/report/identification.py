@@ -208,6 +208,13 @@ def _extensions_section(doc: Document, result: IdentificationResult) -> None:
         + (f" ({nominal} held at nominal: infinite half-width)" if nominal else "")
         + f", widened by ±{band['half_width']:.4g} um (the bound through the static gain "
         f"plus {band['noise_sigmas']:g} sigma of sensor noise)."
+        + (
+            f" The bound is taken over the validation records too; with the bound from "
+            f"the training records alone (input_max {band['input_max_training']:.4g}) the "
+            f"share is {100 * band['coverage_training_bound']:.2f} %."
+            if band.get("coverage_training_bound") is not None
+            else ""
+        )
     )
 
 
