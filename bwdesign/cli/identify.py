@@ -129,6 +129,15 @@ def run_identify(args: argparse.Namespace) -> int:
                     f"  {rec['source']}: fit {rec['fit_percent']:.2f} %, sensor offset "
                     f"{rec['offset']:.6g} ± {Z95 * rec['offset_std_err']:.2g} um"
                 )
+        ext, dist = result.extensions, result.disturbance
+        if ext:
+            print(f"  model extensions chosen: {', '.join(ext['chosen']) or 'none'}")
+        if dist is not None:
+            cov = "-" if result.coverage is None else f"{100 * result.coverage:.1f} %"
+            print(
+                f"  disturbance bound: input_max {dist.input_max:.4g}, rate_max "
+                f"{dist.rate_max:.4g}/s; held-out coverage {cov}"
+            )
         for note in result.diagnostics:
             print(f"note: {note}")
     return EXIT_OK

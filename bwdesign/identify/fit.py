@@ -47,7 +47,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -56,6 +56,8 @@ from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..validate import Range, integer
 from .data import IdentificationData
+from .extend import make_context, select_extensions
+from .extstack import CREEP_TAUS
 from .problem import (
     IA,
     IB,
@@ -68,8 +70,9 @@ from .problem import (
     theta_from_params,
 )
 from .result import FitOutcome, IdentificationResult, build_result
-from .solve import Solution, solve
+from .solve import STEP_TOL, Solution, solve
 from .stack import Stack
+from .unexplained import unexplained
 
 __all__ = ["identify", "NAMES"]
 
@@ -244,8 +247,10 @@ def _bounds(start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-def _refine(prob: Stack, start: np.ndarray, free: np.ndarray, max_nfev: int):
-    return solve(prob, start, free, _bounds(start), max_nfev=max_nfev)
+def _refine(
+    prob: Stack, start: np.ndarray, free: np.ndarray, max_nfev: int, step_tol: float = STEP_TOL
+):
+    return solve(prob, start, free, _bounds(start), max_nfev=max_nfev, step_tol=step_tol)
 
 
 def _multistart(
@@ -374,6 +379,7 @@ def identify(
         alternatives = _profile(fit, max_nfev, say)
     elif free[IW]:
         resonance_held, alternatives = _resonance(fit, records, prior, max_nfev, say)
+    extensions, delay = _extend(fit, records, valids, delay, max_nfev, say)
     # intervals with the resonance free even when it is held: they must not pretend
     # that a resonance the record cannot see is known
     cov_free = fit.free.copy()
@@ -389,7 +395,41 @@ def identify(
         n_starts=multistart,
         seconds=time.perf_counter() - tic,
     )
-    return build_result(fit.prob, outcome, data=records, validation=valids, name=name)
+    result = build_result(fit.prob, outcome, data=records, validation=valids, name=name)
+    bound, coverage, details = unexplained(result, fit.theta, records, valids, delay)
+    if valids and not extensions["chosen"]:
+        # the base model is the fit: its held-out fit is the validation fit
+        extensions["base"]["fit_heldout"] = result.fit_percent["validation"]
+        extensions["final"]["fit_heldout"] = result.fit_percent["validation"]
+    return replace(
+        result,
+        extensions=extensions,
+        disturbance=bound,
+        coverage=coverage,
+        unexplained=details,
+        seconds=time.perf_counter() - tic,
+    )
+
+
+def _extend(
+    fit: _Fit, records: list, valids: list, delay: int, max_nfev: int, say
+) -> tuple[dict[str, Any], int]:
+    """Model extensions the records need (:mod:`bwdesign.identify.extend`), from the base
+    optimum; ``fit`` moves to the chosen model. Returns the extensions document and the
+    input delay of the chosen model."""
+    ctx = make_context(
+        records=records,
+        valids=valids,
+        delay=delay,
+        free=fit.free,
+        refine=_refine,
+        max_nfev=max_nfev,
+        creep_taus=tuple(t for t in CREEP_TAUS if t <= fit.prob.duration),
+    )
+    model, extensions = select_extensions(fit.prob, fit.theta, fit.sol, ctx, say)
+    fit.nfev += ctx.nfev
+    fit.prob, fit.theta, fit.sol = model.prob, model.theta, model.sol
+    return extensions, model.delay
 
 
 def _records(data: Any, what: str) -> list[IdentificationData]:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..model.params import BoucWenParams
-from ..model.uncertainty import UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from .problem import (
     IA,
     IB,
@@ -39,12 +39,17 @@ from .problem import (
     IZ,
     Q_MAX,
     Problem,
-    delayed_input,
     params_from_theta,
 )
 from .stack import Stack
 
-__all__ = ["IdentificationResult", "fit_percent"]
+__all__ = [
+    "IdentificationResult",
+    "fit_percent",
+    "pooled_fit",
+    "residual_whiteness",
+    "validate_record",
+]
 
 NAMES = ("a1", "a2", "a3", "alpha", "beta", "gamma")
 Z95 = 1.959963984540054
@@ -107,6 +112,17 @@ class IdentificationResult:
     validation_records : tuple of dict
         Per validation record: ``source``, ``n_samples``, ``dt``, ``fit_percent``,
         ``residual_rms``.
+    extensions : dict
+        The model extensions tried after the base fit (:mod:`bwdesign.identify.extend`):
+        ``chosen`` (names), ``criterion`` (how), ``candidates`` (per extension: chosen
+        or not and why, fit and whiteness with it), ``base`` (the same without any).
+    disturbance : DisturbanceBound or None
+        What the Bouc-Wen model does not explain, as a slowly varying input-equivalent
+        disturbance bound (:mod:`bwdesign.identify.unexplained`); ``unexplained`` holds
+        how it was computed and the coverage details.
+    coverage : float or None
+        Share of held-out samples inside the band over the box's corners plus the
+        disturbance bound (and sensor noise).
     """
 
     params: BoucWenParams
@@ -135,6 +151,10 @@ class IdentificationResult:
     records: tuple[dict[str, Any], ...] = ()
     validation_records: tuple[dict[str, Any], ...] = ()
     traces: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    extensions: dict[str, Any] = field(default_factory=dict)
+    disturbance: DisturbanceBound | None = None
+    coverage: float | None = None
+    unexplained: dict[str, Any] = field(default_factory=dict)
 
     def to_uncertainty(self) -> UncertaintyBox:
         """The 95 % intervals as an ``[uncertainty]`` box (absolute half-widths).
@@ -180,6 +200,11 @@ class IdentificationResult:
             "n_starts": self.n_starts,
             "seconds": self.seconds,
             "level": self.level,
+            "extensions": self.extensions,
+            "disturbance": (
+                None if self.disturbance is None else self.disturbance.to_dict() | self.unexplained
+            ),
+            "coverage": self.coverage,
         }
         if len(self.records) > 1 or len(self.validation_records) > 1:
             doc["records"] = [dict(r) for r in self.records]
@@ -392,8 +417,10 @@ def _pct(rel: float) -> str:
 # -- assembly -------------------------------------------------------------------
 
 
-def _validate(prob: Problem, theta: np.ndarray) -> tuple[np.ndarray, float]:
-    """Re-estimate offset and initial state on a validation record, parameters held."""
+def validate_record(prob: Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Re-estimate offset and initial state on a validation record, parameters held.
+
+    Returns the model output and the record's fit vector."""
     from .solve import solve
 
     free = np.zeros(10, dtype=bool)
@@ -409,8 +436,7 @@ def _validate(prob: Problem, theta: np.ndarray) -> tuple[np.ndarray, float]:
         th_z, sol = solve(prob, th0, free, (lo, hi), max_nfev=50)
         if best is None or sol.cost < best[1]:
             best = (th_z, sol.cost)
-    pred = prob.predict(best[0])
-    return pred, fit_percent(prob.y, pred)
+    return prob.predict(best[0]), best[0]
 
 
 @dataclass(frozen=True)
@@ -448,7 +474,16 @@ class FitOutcome:
     seconds: float
 
 
-def _pooled_fit(ys: list[np.ndarray], models: list[np.ndarray]) -> float:
+def residual_whiteness(rc: np.ndarray) -> tuple[float, float]:
+    """Lag-1 autocorrelation of a (centred) residual and the share of lags 1-50 outside
+    the ±2/sqrt(N) band of white noise (about 5 % for white noise)."""
+    energy = float(rc @ rc)
+    lags = range(1, min(51, rc.size))
+    acf = np.array([rc[k:] @ rc[:-k] for k in lags]) / energy if energy > 0 else np.zeros(1)
+    return float(acf[0]), float(np.mean(np.abs(acf) > 2.0 / math.sqrt(rc.size)))
+
+
+def pooled_fit(ys: list[np.ndarray], models: list[np.ndarray]) -> float:
     """Fit percent over several records, each about its own mean (one record: fit_percent)."""
     if len(ys) == 1:
         return fit_percent(ys[0], models[0])
@@ -501,8 +536,9 @@ def _validation(
     """Each validation record's model output (offset and initial state re-estimated)."""
     models, summaries = [], []
     for j, rec in enumerate(validation):
-        vprob = Problem(delayed_input(rec.u, delay), rec.y, rec.dt, prob.sign)
-        v_model, _ = _validate(vprob, prob.local(theta, 0))
+        u_in, known = prob.validation_inputs(rec, delay, theta)
+        vprob = Problem(u_in, rec.y - known, rec.dt, prob.sign)
+        v_model = validate_record(vprob, prob.local(theta, 0))[0] + known
         models.append(v_model)
         summaries.append(_summary(rec, v_model))
         pre = "val_" if j == 0 else f"val{j + 1}_"
@@ -525,12 +561,8 @@ def build_result(
     unc = _uncertainty(prob, fit, p, r, alt)
     models = prob.predict_each(theta)
     ys = [pk.y for pk in prob.problems]
-    fit_train = _pooled_fit(ys, models)
-    rc = prob.centre(r)
-    energy = float(rc @ rc)
-    lags = range(1, min(51, rc.size))
-    acf = np.array([rc[k:] @ rc[:-k] for k in lags]) / energy if energy > 0 else np.zeros(1)
-    whiteness = (float(acf[0]), float(np.mean(np.abs(acf) > 2.0 / math.sqrt(rc.size))))
+    fit_train = pooled_fit(ys, models)
+    whiteness = residual_whiteness(prob.centre(r))
     traces = {}
     for k, rec in enumerate(data):
         pre = "" if k == 0 else f"r{k + 1}_"
@@ -564,7 +596,7 @@ def build_result(
         derived=unc.derived,
         fit_percent={
             "train": fit_train,
-            "validation": _pooled_fit(v_ys, v_models) if validation else None,
+            "validation": pooled_fit(v_ys, v_models) if validation else None,
         },
         residual_rms=_rms(ys, models),
         residual_rms_validation=_rms(v_ys, v_models) if validation else None,

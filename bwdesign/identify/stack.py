@@ -114,6 +114,15 @@ class Stack:
             r[b] -= m
         return theta, r
 
+    def validation_inputs(
+        self, rec, delay: int, theta: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Input the model of a held-out record sees, and the output part known in advance
+        (none for the base model; see :class:`bwdesign.identify.extstack.ExtStack`)."""
+        del theta
+        u = delayed_input(rec.u, delay)
+        return u, np.zeros(u.size)
+
     # -- model ---------------------------------------------------------------
     def predict_each(self, theta: np.ndarray) -> list[np.ndarray]:
         """Model output of every record (µm)."""

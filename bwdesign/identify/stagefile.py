@@ -44,6 +44,47 @@ def _records_head(result: IdentificationResult, records: list[IdentificationData
     return head + ["# [sampling] and [reference] come from record 1. "]
 
 
+def _extensions_head(result: IdentificationResult) -> list[str]:
+    """The ``[identification]`` comment block: which model extensions were chosen and why."""
+    ext = result.extensions
+    if not ext:
+        return []
+    chosen = ", ".join(ext["chosen"]) or "none"
+    lines = _comment(
+        f"[identification] model extensions chosen: {chosen}. [plant] is the Bouc-Wen part "
+        f"of that fit. Rule: {ext['criterion']}."
+    )
+    for name, row in ext["candidates"].items():
+        value = ""
+        if row.get("chosen") and "tau_s" in row:
+            value = f" (tau {1e3 * row['tau_s']:.4g} ms, input delay {row['delay_samples']})"
+        elif row.get("chosen") and "weights" in row:
+            pairs = zip(row["taus_s"], row["weights"], strict=True)
+            value = " (weights " + ", ".join(f"{w:.4g} um/V at {t:g} s" for t, w in pairs) + ")"
+        elif row.get("chosen") and "slopes_per_s" in row:
+            value = " (um/s: " + ", ".join(f"{v:.4g}" for v in row["slopes_per_s"]) + ")"
+        lines += _comment(f"  {name}: {row['reason']}{value}")
+    return lines
+
+
+def _disturbance_body(result: IdentificationResult) -> list[str]:
+    """The ``[uncertainty.disturbance]`` table and how it was computed."""
+    if result.disturbance is None:
+        return []
+    how = result.unexplained
+    cov = "not measured" if result.coverage is None else f"{100 * result.coverage:.2f} %"
+    return [
+        "",
+        *_comment(
+            f"What the Bouc-Wen model does not explain, as a slowly varying input-equivalent "
+            f"disturbance: {how['rule']} (window {1e3 * how['window_s']:g} ms, at least "
+            f"{how['min_window_samples']} samples). Coverage of the held-out output by the "
+            f"band over the box's corners plus this bound: {cov}."
+        ),
+        result.disturbance.to_toml().rstrip("\n"),
+    ]
+
+
 def stage_toml(
     result: IdentificationResult, data: IdentificationData | Sequence[IdentificationData]
 ) -> str:
@@ -72,6 +113,7 @@ def stage_toml(
     ]
     for note in result.diagnostics:
         head += _comment("- " + note)
+    head += _extensions_head(result)
     y = data.y - result.offset
     amp = 0.5 * float(np.ptp(y))
     centre = float(np.min(y)) + amp
@@ -105,5 +147,6 @@ def stage_toml(
         "",
         "# 95 % intervals of the fit as absolute half-widths; inf = not determined.",
         result.to_uncertainty().to_toml().rstrip("\n"),
+        *_disturbance_body(result),
     ]
     return "\n".join(head + body) + "\n"

@@ -116,6 +116,8 @@ def identification_document(
     doc.para(f"Intervals: {result.covariance_method}.")
     if len(result.records) > 1 or len(result.validation_records) > 1:
         _records_table(doc, result)
+    if result.extensions:
+        _extensions_section(doc, result)
     doc.heading("Correlation matrix")
     corr = result.correlation
     doc.table(
@@ -141,6 +143,79 @@ def identification_document(
         f"{result.seconds:.2f} s\nconverged {result.converged}: {result.reason}"
     )
     return doc
+
+
+def _pct_or_dash(v: float | None, digits: int = 3) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+def _extensions_section(doc: Document, result: IdentificationResult) -> None:
+    """Fit and residual whiteness with and without each extension, the disturbance
+    bound and the coverage."""
+    ext = result.extensions
+    doc.heading("Model extensions")
+    doc.para(
+        f"Chosen: {', '.join(ext['chosen']) or 'none'}. {ext['criterion']}. The [plant] "
+        "parameters are the Bouc-Wen part of the chosen fit. Whiteness: lag-1 residual "
+        "autocorrelation and the share of lags 1-50 outside the ±2/sqrt(N) band (about 5 % "
+        "for white noise). Rows screened out show the fit after one Gauss-Newton step."
+    )
+    rows = []
+    for label, row in [("base model", ext["base"]), ("chosen model", ext["final"])] + [
+        (f"+ {name}", r) for name, r in ext["candidates"].items()
+    ]:
+        rows.append(
+            [
+                label,
+                _pct_or_dash(row.get("fit_train")),
+                _pct_or_dash(row.get("fit_heldout")),
+                _pct_or_dash(row.get("acf1")),
+                _pct_or_dash(None if "frac_out" not in row else 100 * row["frac_out"], 0),
+                _pct_or_dash(row.get("delta_bic"), 1),
+                row.get("reason", "-"),
+            ]
+        )
+    doc.table(
+        [
+            "model",
+            "fit train (%)",
+            "fit held-out (%)",
+            "lag-1 acf",
+            "lags outside (%)",
+            "BIC change",
+            "decision",
+        ],
+        rows,
+        id="extensions",
+    )
+    if result.disturbance is None:
+        return
+    how, dist = result.unexplained, result.disturbance
+    band = how["band"]
+    cov = "not measured" if result.coverage is None else f"{100 * result.coverage:.2f} %"
+    nominal = ", ".join(band["nominal_for"])
+    doc.heading("Unexplained behaviour and coverage")
+    doc.para(
+        f"Input-equivalent disturbance bound [uncertainty.disturbance]: input_max = "
+        f"{dist.input_max:.4g}, rate_max = {dist.rate_max:.4g} per s ({dist.source}). Rule: "
+        f"{how['rule']}; window {1e3 * how['window_s']:g} ms (at least "
+        f"{how['min_window_samples']} samples); static gain {how['static_gain']:.6g} um/V; "
+        f"sensor noise (fast remainder) {how['noise_std']:.3g} um."
+    )
+    doc.para(
+        f"Coverage on the {band['heldout']}: {cov} of the samples lie inside the band over "
+        f"{band['corners']} corner(s) of the [uncertainty] box"
+        + (f" ({nominal} held at nominal: infinite half-width)" if nominal else "")
+        + f", widened by ±{band['half_width']:.4g} um (the bound through the static gain "
+        f"plus {band['noise_sigmas']:g} sigma of sensor noise)."
+        + (
+            f" The bound is taken over the validation records too; with the bound from "
+            f"the training records alone (input_max {band['input_max_training']:.4g}) the "
+            f"share is {100 * band['coverage_training_bound']:.2f} %."
+            if band.get("coverage_training_bound") is not None
+            else ""
+        )
+    )
 
 
 def _records_table(doc: Document, result: IdentificationResult) -> None:
