@@ -51,7 +51,7 @@ def test_base_truth_keeps_extensions_off_and_is_covered():
     assert all(not row["chosen"] and row["reason"] for row in ext["candidates"].values())
     assert res.coverage >= 0.95
     # the bound from the training record alone covers the held-out record as well
-    assert res.unexplained["band"]["coverage_training_bound"] >= 0.95
+    assert res.unexplained["band"]["coverage_full_bound"] >= 0.95
     assert all(_inside(res))
     # the bound is small: what the model misses is noise (10 nm on a ~160 um stroke)
     assert 0 < res.disturbance.input_max < 0.05
@@ -87,7 +87,7 @@ def test_creep_and_amplifier_lag_are_chosen_and_whiten():
     assert final["frac_out"] < base["frac_out"]
     assert final["fit_heldout"] > base["fit_heldout"] + 1.0
     assert res.coverage >= 0.95
-    assert res.unexplained["band"]["coverage_training_bound"] >= 0.95
+    assert res.unexplained["band"]["coverage_full_bound"] >= 0.95
     # the Bouc-Wen part of the extended fit is the truth's
     assert res.params.static_gain == pytest.approx(PLANT.static_gain, rel=0.02)
 

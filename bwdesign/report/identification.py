@@ -202,17 +202,18 @@ def _extensions_section(doc: Document, result: IdentificationResult) -> None:
         f"{how['min_window_samples']} samples); static gain {how['static_gain']:.6g} um/V; "
         f"sensor noise (fast remainder) {how['noise_std']:.3g} um."
     )
+    full = band.get("coverage_full_bound")
     doc.para(
         f"Coverage on the {band['heldout']}: {cov} of the samples lie inside the band over "
         f"{band['corners']} corner(s) of the [uncertainty] box"
         + (f" ({nominal} held at nominal: infinite half-width)" if nominal else "")
-        + f", widened by ±{band['half_width']:.4g} um (the bound through the static gain "
-        f"plus {band['noise_sigmas']:g} sigma of sensor noise)."
+        + f", widened by the bound from the training records alone (input_max "
+        f"{band['input_max_training']:.4g}) through the static gain plus "
+        f"{band['noise_sigmas']:g} sigma of sensor noise."
         + (
-            f" The bound is taken over the validation records too; with the bound from "
-            f"the training records alone (input_max {band['input_max_training']:.4g}) the "
-            f"share is {100 * band['coverage_training_bound']:.2f} %."
-            if band.get("coverage_training_bound") is not None
+            f" With the bound written to the stage file (taken over the validation records "
+            f"too; band ±{band['half_width']:.4g} um) the share is {100 * full:.2f} %."
+            if full is not None
             else ""
         )
     )
