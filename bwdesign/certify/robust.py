@@ -127,7 +127,7 @@ from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import discretize
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
-from ..model.uncertainty import DisturbanceBound, UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
 from ..observers.gains import check_gains, discrete_gains
 from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
@@ -371,7 +371,7 @@ def certify_robust(
     vertices = uncertainty.vertices(params)
     rng = np.random.default_rng(seed)
     interior = uncertainty.sample(params, rng, int(interior_samples))
-    st = _setup(params, lp, observer, udot_max, _disturbance(disturbance))
+    st = _setup(params, lp, observer, udot_max, disturbance_bounds(disturbance))
     data_v = [_plant_data(st, tp) for tp in vertices]
     data_i = [_plant_data(st, tp) for tp in interior]
     data = data_v + data_i
@@ -395,17 +395,6 @@ def certify_robust(
         details = {"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []}
         return _not_certified(base, why, av, details, sol.solver if sol is not None else "")
     return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, lp.dt, base)
-
-
-def _disturbance(disturbance: Any) -> tuple[float, float]:
-    """``(input_max, rate_max)`` of the disturbance, ``(0, 0)`` for none."""
-    if disturbance is None:
-        return (0.0, 0.0)
-    if not isinstance(disturbance, DisturbanceBound):
-        raise InputError(
-            f"disturbance must be a DisturbanceBound or None, got {type(disturbance).__name__}"
-        )
-    return (disturbance.input_max, disturbance.rate_max)
 
 
 def _not_certified(

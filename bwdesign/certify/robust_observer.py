@@ -79,7 +79,7 @@ from scipy.linalg import matrix_balance, solve_discrete_lyapunov
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
-from ..model.uncertainty import DisturbanceBound, UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
 from ..observers.gains import as_gains, check_gains, discrete_gains
 from ..validate import NONNEGATIVE, SEED, SIGNAL, UDOT_MAX, integer, real
 from .checks import rho_interval
@@ -135,17 +135,6 @@ def _sampling(sampling: Any) -> BoxSampling:
     if not isinstance(sampling, BoxSampling):
         raise InputError(f"sampling must be a BoxSampling or None, got {type(sampling).__name__}")
     return sampling
-
-
-def _disturbance(disturbance: Any) -> tuple[float, float]:
-    """``(input_max, rate_max)`` of the input disturbance, ``(0, 0)`` for none."""
-    if disturbance is None:
-        return (0.0, 0.0)
-    if not isinstance(disturbance, DisturbanceBound):
-        raise InputError(
-            f"disturbance must be a DisturbanceBound or None, got {type(disturbance).__name__}"
-        )
-    return (disturbance.input_max, disturbance.rate_max)
 
 
 @dataclass(frozen=True)
@@ -331,7 +320,7 @@ def _problem(
     if not u_lo < u_hi:
         raise InputError(f"input_range must be finite with u_lo < u_hi, got {input_range!r}")
     sampling = _sampling(sampling)
-    dist = _disturbance(disturbance)
+    dist = disturbance_bounds(disturbance)
     vertices = uncertainty.vertices(params)
     interior = sampling.points(uncertainty, params)
     rho = rho_interval(params, udot_max, dt)

@@ -32,7 +32,7 @@ from ..errors import BWDesignError, ConfigError, InputError, ParameterError
 from ..validate import NONNEGATIVE, Range, parse_real, real
 from .params import MODEL_FIELDS, BoucWenParams
 
-__all__ = ["UncertaintyBox", "DisturbanceBound"]
+__all__ = ["UncertaintyBox", "DisturbanceBound", "disturbance_bounds"]
 
 _KINDS = ("rel", "abs")
 _SOURCES = ("identified", "specified")
@@ -453,3 +453,20 @@ class DisturbanceBound:
             f"rate_max = {self.rate_max!r}\n"
             f'source = "{self.source}"\n'
         )
+
+
+def disturbance_bounds(disturbance: Any) -> tuple[float, float]:
+    """``(input_max, rate_max)`` of an optional :class:`DisturbanceBound`; ``(0, 0)`` for None.
+
+    Raises
+    ------
+    InputError
+        ``disturbance`` is neither None nor a DisturbanceBound.
+    """
+    if disturbance is None:
+        return (0.0, 0.0)
+    if not isinstance(disturbance, DisturbanceBound):
+        raise InputError(
+            f"disturbance must be a DisturbanceBound or None, got {type(disturbance).__name__}"
+        )
+    return (disturbance.input_max, disturbance.rate_max)
