@@ -12,7 +12,14 @@ import numpy as np
 from ..model.params import BoucWenParams
 from ..validate import Range
 
-__all__ = ["TIERS", "Margin", "TierCertificate", "CertificateReport", "SynthesisResult"]
+__all__ = [
+    "TIERS",
+    "Margin",
+    "TierCertificate",
+    "CertificateReport",
+    "SynthesisResult",
+    "RobustCertificate",
+]
 
 
 #: Tier names, weakest first; ``best`` is the last one that holds.
@@ -352,3 +359,66 @@ def frozen_array(a: np.ndarray) -> np.ndarray:
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
+
+
+@dataclass(frozen=True)
+class RobustCertificate:
+    """Robust convergence and steady error bounds of the sampled loop over a box.
+
+    Attributes
+    ----------
+    holds : bool
+        A common ``P`` passed the outside check at every corner, both ``rho`` ends
+        and every interior sample.
+    status : str
+    decay : float or None
+        Certified convergence rate of the error into the ellipsoid (1/s).
+    tracking_bound, estimation_bound, x3_estimation_bound : float or None
+        Certified steady bounds on ``|x1 - x_d|``, ``|x1hat - x1|`` and
+        ``|x3hat - x3|`` (posterior) at the sample instants (length unit).
+    a : float
+        Contraction factor per sample used in the LMI.
+    noise_max : float
+        Sensor noise bound assumed (length unit).
+    n_vertices, n_interior : int
+    input_bounds : dict
+        Bound of each exogenous channel (the reference channel per state).
+    margins : tuple of Margin
+        Smallest eigenvalue per checked block (passed when ``-min eig < 0``).
+    solver : str
+    details : dict
+    """
+
+    holds: bool
+    status: str
+    decay: float | None
+    tracking_bound: float | None
+    estimation_bound: float | None
+    x3_estimation_bound: float | None
+    a: float
+    noise_max: float
+    n_vertices: int
+    n_interior: int
+    input_bounds: dict[str, Any]
+    margins: tuple[Margin, ...] = ()
+    solver: str = ""
+    details: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        worst = min(self.margins, key=lambda m: m.limit - m.value) if self.margins else None
+        return {
+            "holds": self.holds,
+            "status": self.status,
+            "decay": self.decay,
+            "tracking_bound": self.tracking_bound,
+            "estimation_bound": self.estimation_bound,
+            "x3_estimation_bound": self.x3_estimation_bound,
+            "a": self.a,
+            "noise_max": self.noise_max,
+            "n_vertices": self.n_vertices,
+            "n_interior": self.n_interior,
+            "input_bounds": self.input_bounds,
+            "worst_margin": None if worst is None else worst.to_dict(),
+            "solver": self.solver,
+            "details": self.details,
+        }
