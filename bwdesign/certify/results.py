@@ -19,6 +19,7 @@ __all__ = [
     "CertificateReport",
     "SynthesisResult",
     "RobustCertificate",
+    "worst_margin",
 ]
 
 
@@ -361,6 +362,11 @@ def frozen_array(a: np.ndarray) -> np.ndarray:
     return a
 
 
+def worst_margin(margins: tuple[Margin, ...]) -> Margin | None:
+    """The margin closest to its limit (the one a certificate's JSON quotes), or None."""
+    return min(margins, key=lambda m: m.limit - m.value) if margins else None
+
+
 @dataclass(frozen=True)
 class RobustCertificate:
     """Robust convergence and steady error bounds of the sampled loop over a box.
@@ -405,7 +411,7 @@ class RobustCertificate:
     details: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        worst = min(self.margins, key=lambda m: m.limit - m.value) if self.margins else None
+        worst = worst_margin(self.margins)
         return {
             "holds": self.holds,
             "status": self.status,

@@ -89,7 +89,7 @@ from .ellipsoid import (
     schur_min_eig,
     search_log_contraction,
 )
-from .results import CONTRACTION, Margin
+from .results import CONTRACTION, Margin, worst_margin
 
 __all__ = [
     "BoxSampling",
@@ -184,7 +184,7 @@ class RobustObserverCertificate:
     details: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        worst = min(self.margins, key=lambda m: m.limit - m.value) if self.margins else None
+        worst = worst_margin(self.margins)
         return {
             "holds": self.holds,
             "status": self.status,
@@ -643,11 +643,10 @@ def certify_robust_observer(
     """
     dt = check_sample_time(params, dt)
     K = discrete_gains(params, check_gains(params, gains), dt)
-    pb = robust_observer_problem(
-        params, dt=dt, uncertainty=uncertainty, udot_max=udot_max, input_range=input_range,
-        noise_max=noise_max, sampling=sampling, disturbance=disturbance,
+    return certify_robust_observer_discrete(
+        params, K, dt=dt, uncertainty=uncertainty, udot_max=udot_max, input_range=input_range,
+        noise_max=noise_max, sampling=sampling, a=a, disturbance=disturbance,
     )  # fmt: skip
-    return _certify_K(pb, np.asarray(K, float), a)
 
 
 def certify_robust_observer_discrete(
