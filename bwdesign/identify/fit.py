@@ -136,15 +136,17 @@ def _grid_hysteresis(prob: Stack, base: np.ndarray, free: np.ndarray) -> tuple[f
     """
     betas = np.geomspace(0.3, 100.0, 9) / prob.u_range if free[IB] else [math.exp(base[IB])]
     qs = (-1.0, 0.0, 1.0) if free[IQ] else (base[IQ],)
-    best = None  # ties (all infinite: no positive gain and alpha) keep the first point
+    grid = []
     for beta in betas:
         for q in qs:
             for z in (-0.8, 0.0, 0.8):
                 th = base.copy()
                 th[IB], th[IQ], th[prob.i_z] = math.log(beta), q, z
-                scored = prob.project(th)
-                if best is None or scored[0] < best[0]:
-                    best = scored
+                grid.append(th)
+    best = None  # ties (all infinite: no positive gain and alpha) keep the first point
+    for scored in prob.project_many(grid):
+        if best is None or scored[0] < best[0]:
+            best = scored
     for k in range(prob.n_records if prob.n_records > 1 else 0):
         th = best[1]
         for z in (-0.8, 0.0, 0.8):

@@ -32,6 +32,7 @@ from ..model.params import A3_MAGNITUDE, PARAM_RANGES, BoucWenParams
 from .simulate import (
     Segments,
     hysteresis_path,
+    hysteresis_paths,
     hysteresis_sensitivity,
     linear_matrices,
     linear_response,
@@ -134,6 +135,8 @@ class Problem:
         self.segments = Segments(self.u)
         self._cache: dict[tuple[float, float, float], np.ndarray] = {}
         self._sens: tuple[tuple[float, float, float], np.ndarray, np.ndarray] | None = None
+        # responses that do not depend on the hysteresis path, for the last (lag, resonance)
+        self._fixed: tuple[tuple[float, float], np.ndarray] | None = None
         self.n_loops = 0
 
     # -- model --------------------------------------------------------------
@@ -225,14 +228,23 @@ class Problem:
 
     # -- linear sub-problem (variable projection, for start values) ----------
     def linear_basis(self, theta: np.ndarray, h_unit: np.ndarray) -> np.ndarray:
-        """Columns whose coefficients are K, alpha, offset, x1_0 and x2_0 deviations."""
+        """Columns whose coefficients are K, alpha, offset, x1_0 and x2_0 deviations.
+
+        The gain and initial-state columns depend on the lag and resonance only: they
+        are kept for the last (lag, resonance), so a grid over the hysteresis shape
+        filters one column per point (the same numbers as filtering all five).
+        """
+        key = (float(theta[IW]), float(theta[ITAU]))
         wn = math.exp(theta[IW])
         phi, b = linear_matrices(wn * wn, math.exp(theta[ITAU]) * wn * wn, self.dt)
-        zero = np.zeros_like(self.u)
-        drive = np.column_stack([self.sign * self.u, -h_unit, zero, zero])
-        x0 = np.array([[self.sign * self.u[0], -h_unit[0], 1.0, 0.0], [0.0, 0.0, 0.0, wn]])
-        resp = linear_response(phi, b, drive, x0)
-        return np.column_stack([resp[:, :2], np.ones_like(self.u), resp[:, 2:]])
+        if self._fixed is None or self._fixed[0] != key:
+            zero = np.zeros_like(self.u)
+            drive = np.column_stack([self.sign * self.u, zero, zero])
+            x0 = np.array([[self.sign * self.u[0], 1.0, 0.0], [0.0, 0.0, wn]])
+            self._fixed = (key, linear_response(phi, b, drive, x0))
+        fixed = self._fixed[1]
+        h_resp = linear_response(phi, b, -h_unit, np.array([-h_unit[0], 0.0]))
+        return np.column_stack([fixed[:, 0], h_resp, np.ones_like(self.u), fixed[:, 1:]])
 
     def project(
         self, theta: np.ndarray, h_unit: np.ndarray | None = None
@@ -247,14 +259,63 @@ class Problem:
             h_unit = self.unit_hysteresis(theta)
         basis = self.linear_basis(theta, h_unit)
         coef, *_ = np.linalg.lstsq(basis, self.y, rcond=None)
-        th = theta.copy()
         if coef[0] <= 0 or coef[1] <= 0:
-            return math.inf, th
+            return math.inf, theta.copy()
         r = basis @ coef - self.y
+        return float(r @ r) / self.y_scale**2, self._filled(theta, coef)
+
+    def _filled(self, theta: np.ndarray, coef: np.ndarray) -> np.ndarray:
+        """``theta`` with the linear coefficients (K, alpha, offset, x1_0, x2_0) set."""
+        th = theta.copy()
         th[IK] = math.log(coef[0])
         th[IA] = math.log(coef[1])
         th[IOFF] = (coef[2] - self.y_mean) / self.y_scale
         # basis columns 3, 4 are responses to unit x1 and x2/wn deviations
         th[IE1] = coef[3] / self.y_scale
         th[IE2] = coef[4] / self.y_scale
-        return float(r @ r) / self.y_scale**2, th
+        return th
+
+    def project_many(self, thetas: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
+        """:meth:`project` for several hysteresis shapes at one lag and resonance (a grid).
+
+        The paths are computed together (:func:`hysteresis_paths`) and filtered in one
+        call; the gain and initial-state columns are shared, so each point's least
+        squares is one column projected against their QR factor. The same minimiser as
+        :meth:`project` to rounding (which it falls back to when those columns are
+        nearly dependent).
+        """
+        if len({(float(t[IW]), float(t[ITAU])) for t in thetas}) != 1:
+            return [self.project(t) for t in thetas]
+        th0 = thetas[0]
+        beta = np.exp([float(t[IB]) for t in thetas])
+        gamma = beta * np.tanh([float(t[IQ]) for t in thetas])
+        cp, cm = beta + gamma, beta - gamma
+        h = hysteresis_paths(self.segments, np.array([t[IZ] for t in thetas]) / cp, 1.0, cp, cm)
+        self.n_loops += len(thetas)
+        self.linear_basis(th0, h[:, 0])  # the shared columns for this lag and resonance
+        fixed = self._fixed[1]
+        shared = np.column_stack([fixed[:, 0], np.ones_like(self.u), fixed[:, 1:]])
+        q, r_f = np.linalg.qr(shared)
+        diag = np.abs(np.diag(r_f))
+        if diag.min() <= 1e-10 * diag.max():
+            return [self.project(t) for t in thetas]
+        wn = math.exp(th0[IW])
+        phi, b = linear_matrices(wn * wn, math.exp(th0[ITAU]) * wn * wn, self.dt)
+        resp = linear_response(phi, b, -h, np.vstack([-h[0], np.zeros(h.shape[1])]))
+        qy = q.T @ self.y
+        y_perp = self.y - q @ qy
+        q_resp = q.T @ resp
+        perp = resp - q @ q_resp
+        norm2 = np.einsum("ij,ij->j", perp, perp)
+        c_h = np.divide(perp.T @ y_perp, norm2, out=np.zeros_like(norm2), where=norm2 > 0)
+        resid = y_perp[:, None] - perp * c_h
+        cost = np.einsum("ij,ij->j", resid, resid) / self.y_scale**2
+        c_f = np.linalg.solve(r_f, qy[:, None] - q_resp * c_h)  # K, offset, x1_0, x2_0
+        out = []
+        for g, t in enumerate(thetas):
+            coef = np.array([c_f[0, g], c_h[g], c_f[1, g], c_f[2, g], c_f[3, g]])
+            if coef[0] <= 0 or coef[1] <= 0:
+                out.append((math.inf, t.copy()))
+            else:
+                out.append((float(cost[g]), self._filled(t, coef)))
+        return out

@@ -27,6 +27,7 @@ from ..model.params import BoucWenParams
 __all__ = [
     "Segments",
     "hysteresis_path",
+    "hysteresis_paths",
     "hysteresis_sensitivity",
     "linear_matrices",
     "linear_response",
@@ -224,6 +225,48 @@ def hysteresis_path(
     cp, cm = beta + gamma, beta - gamma
     g0, _ = _runs(seg, h0, cp, cm, alpha, False)
     return _evaluate(seg, g0, None, cp, cm, alpha, False)[0]
+
+
+def _advance(g0, w, cp, cm, alpha):
+    """:func:`_run_end` without sensitivities, for arrays (``w`` broadcasts against ``g0``).
+
+    On a branch of constant ``c`` the state after travel ``v`` is
+    ``g e^{-cv} - alpha expm1(-cv)/c`` (``alpha v`` at ``c = 0``).
+    """
+    neg = g0 < 0.0
+    m = np.where(neg, -g0 / alpha, 0.0)
+    y = cm * m
+    ys = np.where(y < 1e-4, 1.0, y)
+    wz = m * np.where(y < 1e-4, 1.0 - y / 2 + y * y / 3, np.log1p(ys) / ys)
+    cross = neg & (w > wz)
+    c = np.where(neg & ~cross, cm, cp)
+    v = np.where(cross, w - wz, w)
+    em = np.expm1(-c * v)
+    rise = np.divide(-alpha * em, c, out=alpha * v * np.ones_like(em), where=c > 0)
+    return np.where(cross, 0.0, g0) * (em + 1.0) + rise
+
+
+def hysteresis_paths(
+    segments: Segments, h0: np.ndarray, alpha: float, cp: np.ndarray, cm: np.ndarray
+) -> np.ndarray:
+    """:func:`hysteresis_path` for several parameter sets at once (a start grid).
+
+    ``h0``, ``cp = beta + gamma`` and ``cm = beta - gamma`` are arrays of one
+    length ``G``; returns ``(N, G)``, column ``g`` the path of set ``g`` (equal to
+    :func:`hysteresis_path` to rounding). One pass over the runs for all sets.
+    """
+    h = np.array(h0, dtype=float)
+    cp = np.asarray(cp, dtype=float)
+    cm = np.asarray(cm, dtype=float)
+    g0 = np.empty((segments.starts.size, h.size))
+    for j, (s, w) in enumerate(zip(segments.s.tolist(), segments.w_end.tolist(), strict=True)):
+        g = s * h
+        g0[j] = g
+        h = s * _advance(g, w, cp, cm, alpha)
+    # every sample from its run's start state and the travel since
+    return segments.s[segments.seg, None] * _advance(
+        g0[segments.seg], segments.w[:, None], cp, cm, alpha
+    )
 
 
 def hysteresis_sensitivity(

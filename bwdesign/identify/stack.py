@@ -186,3 +186,10 @@ class Stack:
             th[self.i_e1[k]] = c1 / self.y_scale
             th[self.i_e2[k]] = c2 / self.y_scale
         return float(r @ r) / self.y_scale**2, th
+
+    def project_many(self, thetas: list[np.ndarray]) -> list[tuple[float, np.ndarray]]:
+        """:meth:`project` of each of ``thetas`` (one record: computed together, see
+        :meth:`bwdesign.identify.problem.Problem.project_many`)."""
+        if self.n_records == 1:
+            return self.problems[0].project_many(thetas)
+        return [self.project(t) for t in thetas]
