@@ -88,8 +88,39 @@ def test_creep_and_amplifier_lag_are_chosen_and_whiten():
     assert final["fit_heldout"] > base["fit_heldout"] + 1.0
     assert res.coverage >= 0.95
     assert res.unexplained["band"]["coverage_full_bound"] >= 0.95
-    # the Bouc-Wen part of the extended fit is the truth's
+    # the Bouc-Wen part of the extended fit is the truth's, inside the box (the lag
+    # fitted to 0.02 % of its profile minimum and the intervals marginal over it)
     assert res.params.static_gain == pytest.approx(PLANT.static_gain, rel=0.02)
+    assert all(_inside(res))
+
+
+def test_extensions_found_together_when_one_at_a_time_stays_biased():
+    # 6 s, no validation record: the base fit takes a 3-sample input delay for the 2 ms
+    # lag and flattens the hysteresis to follow the creep; from there no single
+    # extension helps (the one-step screens predict a worse BIC), all of them together do
+    res = identify(_record(11, 6.0, amp_tau=2e-3, creep=(0.06, 0.06, 0.0)))
+    ext = res.extensions
+    assert ext["base"]["acf1"] > 0.9
+    assert set(ext["chosen"]) == {"amplifier_lag", "creep"}
+    assert "together" in ext["candidates"]["creep"]["reason"]
+    assert not ext["candidates"]["drift"]["chosen"]
+    assert ext["candidates"]["amplifier_lag"]["tau_s"] == pytest.approx(2e-3, rel=0.02)
+    assert res.delay_samples == 0
+    weights = np.array(ext["candidates"]["creep"]["weights"]) / PLANT.static_gain
+    assert np.all(np.abs(weights - (0.06, 0.06)) < 0.006)
+    assert ext["final"]["acf1"] < 0.2
+    assert all(_inside(res))
+
+
+@pytest.mark.slow
+def test_box_contains_truth_with_creep_and_lag_campaign():
+    # 20 seeded 10 s records of a truth with creep and a 2 ms amplifier lag, no
+    # validation record. Measured: 108 of 120 parameter-trial pairs (0.90) against the
+    # stated 0.95; the misses come in whole trials (the lag ~2.5 standard errors off
+    # moves all six together), so 0.85 guards against a regression, not the level
+    truth = {"amp_tau": 2e-3, "creep": (0.03, 0.03, 0.04)}
+    hits = [h for s in range(30, 50) for h in _inside(identify(_record(s, 10.0, **truth)))]
+    assert sum(hits) / len(hits) >= 0.85
 
 
 def _slow_sine(seconds=8.0, fs=200.0):

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.signal import lfilter
@@ -83,6 +83,9 @@ class ExtStack(Stack):
     def __init__(self, problems: Sequence[Problem], config: ExtConfig, times: list[np.ndarray]):
         super().__init__(problems)
         self.config = config
+        self.times = times
+        #: the records' delayed inputs before the amplifier lag (set by :meth:`build_ext`)
+        self.raw: Sequence[Problem] | None = None
         cols = []
         r_n = self.n_records
         for b in self.blocks():
@@ -107,11 +110,32 @@ class ExtStack(Stack):
     ) -> ExtStack:
         """The extended stack of ``records`` (objects with ``t``, ``u``, ``y``, ``dt``)."""
         base = Stack.build(records, sign, delay=delay)
+        out = cls._lagged(base.problems, config, [np.asarray(r.t, dtype=float) for r in records])
+        out.raw = base.problems
+        return out
+
+    @classmethod
+    def _lagged(cls, raw: Sequence[Problem], config: ExtConfig, times: list) -> ExtStack:
         problems = [
-            Problem(first_order_lag(p.u, p.dt, config.amp_tau), p.y, p.dt, sign, y_scale=p.y_scale)
-            for p in base.problems
+            Problem(
+                first_order_lag(p.u, p.dt, config.amp_tau), p.y, p.dt, p.sign, y_scale=p.y_scale
+            )
+            for p in raw
         ]
-        return cls(problems, config, [np.asarray(r.t, dtype=float) for r in records])
+        return cls(problems, config, times)
+
+    def held_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """The residual's derivative in ``log`` of the amplifier lag (held in the fit,
+        profiled outside): central differences of the whole extended model, so that
+        the intervals of the other coordinates are marginal over the lag."""
+        if self.config.amp_tau <= 0 or self.raw is None:
+            return super().held_jacobian(theta)
+        step = 1e-3
+        cols = []
+        for sgn in (1.0, -1.0):
+            cfg = replace(self.config, amp_tau=self.config.amp_tau * math.exp(sgn * step))
+            cols.append(ExtStack._lagged(self.raw, cfg, self.times).residual(theta))
+        return ((cols[0] - cols[1]) / (2.0 * step))[:, None]
 
     # -- the linear extension columns projected out ------------------------------
     def centre(self, x: np.ndarray) -> np.ndarray:

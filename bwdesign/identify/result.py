@@ -645,7 +645,12 @@ def _uncertainty(
     """The covariance at the optimum, mapped to a1..gamma and widened by the alternatives."""
     theta, free = fit.theta, fit.free
     jac = prob.jacobian(theta, free, central=True)
-    cov_free, lag = _covariance(jac, r, prob.blocks() if prob.n_records > 1 else None)
+    # coordinates held in the fit (an amplifier lag) join the covariance: marginal intervals
+    held = prob.held_jacobian(theta)
+    cov_all, lag = _covariance(
+        np.hstack([jac, held]), r, prob.blocks() if prob.n_records > 1 else None
+    )
+    cov_free = cov_all[: jac.shape[1], : jac.shape[1]]
     cov = np.zeros((theta.size, theta.size))
     idx = np.flatnonzero(free)
     cov[np.ix_(idx, idx)] = cov_free

@@ -154,6 +154,12 @@ class Stack:
             jac[b, cols[lf]] = p.jacobian(self.local(theta, k), lf)
         return jac[:, free]
 
+    def held_jacobian(self, theta: np.ndarray) -> np.ndarray:
+        """Residual derivatives in coordinates held during the fit but estimated from the
+        data (none here; see :class:`bwdesign.identify.extstack.ExtStack`): ``(n, 0)``."""
+        del theta
+        return np.zeros((self.n, 0))
+
     def unit_hysteresis(self, theta: np.ndarray) -> list[np.ndarray]:
         """Each record's hysteresis path for ``alpha = 1``."""
         return [p.unit_hysteresis(self.local(theta, k)) for k, p in enumerate(self.problems)]
