@@ -166,3 +166,20 @@ def test_cli_json_and_stage_file_carry_extensions_disturbance_coverage(tmp_path,
     assert "# [identification] model extensions chosen: none" in text
     report = (tmp_path / "r" / "report.md").read_text()
     assert "Model extensions" in report and "Coverage on the validation record(s)" in report
+
+
+def test_coverage_below_target_is_measured_and_said():
+    # the validation record drifts 1.5 um over 3 s, the training record does not: the
+    # bound sized on training alone cannot cover it, and the fit says so
+    from bwdesign.identify import IdentificationData as Data
+
+    valid = _record(2, 3.0)
+    y = valid.y + 0.5 * (valid.t - valid.t[0])
+    res = identify(_record(1, 4.0), validation=Data.from_arrays(valid.t, valid.u, y, source="v"))
+    assert res.coverage < 0.95
+    assert res.unexplained["band"]["coverage_full_bound"] >= 0.95
+    note = [n for n in res.diagnostics if "held-out coverage" in n]
+    assert len(note) == 1 and f"{100 * res.coverage:.2f} %" in note[0]
+    # a record that is covered gets no such note
+    ok = identify(_record(1, 4.0), validation=_record(2, 3.0))
+    assert ok.coverage >= 0.95 and not any("held-out coverage" in n for n in ok.diagnostics)

@@ -72,7 +72,7 @@ from .problem import (
 from .result import FitOutcome, IdentificationResult, build_result
 from .solve import STEP_TOL, Solution, solve
 from .stack import Stack
-from .unexplained import unexplained
+from .unexplained import coverage_note, unexplained
 
 __all__ = ["identify", "NAMES"]
 
@@ -399,6 +399,9 @@ def identify(
     )
     result = build_result(fit.prob, outcome, data=records, validation=valids, name=name)
     bound, coverage, details = unexplained(result, fit.theta, records, valids, delay)
+    note = coverage_note(coverage, details)
+    if note:
+        result = replace(result, diagnostics=(*result.diagnostics, note))
     if valids and not extensions["chosen"]:
         # the base model is the fit: its held-out fit is the validation fit
         extensions["base"]["fit_heldout"] = result.fit_percent["validation"]

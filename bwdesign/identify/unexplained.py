@@ -42,7 +42,15 @@ from .problem import Problem, delayed_input, theta_from_params
 from .result import IdentificationResult, validate_record
 from .stack import Stack
 
-__all__ = ["unexplained", "WINDOW_S", "MIN_WINDOW", "MARGIN", "NOISE_SIGMAS"]
+__all__ = [
+    "unexplained",
+    "coverage_note",
+    "WINDOW_S",
+    "MIN_WINDOW",
+    "MARGIN",
+    "NOISE_SIGMAS",
+    "COVERAGE_TARGET",
+]
 
 #: Smoothing window of the disturbance (s).
 WINDOW_S = 0.01
@@ -52,6 +60,8 @@ MIN_WINDOW = 11
 MARGIN = 1.2
 #: Sensor-noise half-width of the coverage band (standard deviations).
 NOISE_SIGMAS = 3.0
+#: Share of held-out samples the band should contain.
+COVERAGE_TARGET = 0.95
 _NAMES = ("a1", "a2", "a3", "alpha", "beta", "gamma")
 
 
@@ -178,3 +188,23 @@ def _outside(result: IdentificationResult, held: list) -> tuple[np.ndarray, list
         parts.append(np.maximum(np.maximum(lo - y, y - hi), 0.0))
     out = np.concatenate(parts) if parts else np.zeros(0)
     return out, nominal_for, len(corners)
+
+
+def coverage_note(coverage: float | None, details: dict[str, Any]) -> str | None:
+    """A diagnostic when the held-out coverage is below :data:`COVERAGE_TARGET` (else None)."""
+    if coverage is None or coverage >= COVERAGE_TARGET:
+        return None
+    full = details["band"].get("coverage_full_bound")
+    tail = (
+        f"; the bound written to the stage file, sized on the validation records too, "
+        f"covers {100 * full:.2f} % of them"
+        if full is not None
+        else ""
+    )
+    return (
+        f"The held-out coverage is {100 * coverage:.2f} %, below the "
+        f"{100 * COVERAGE_TARGET:g} % asked: the {details['band']['heldout']} show "
+        f"behaviour the training records do not (a larger or slower disturbance, drift, "
+        f"creep, amplitudes outside the trained range){tail}. What would help: train on "
+        "records like the held-out ones too (--data A --data B)."
+    )
