@@ -296,9 +296,13 @@ class Problem:
         fixed = self._fixed[1]
         shared = np.column_stack([fixed[:, 0], np.ones_like(self.u), fixed[:, 1:]])
         q, r_f = np.linalg.qr(shared)
-        diag = np.abs(np.diag(r_f))
-        if diag.min() <= 1e-10 * diag.max():
+        # a column within rounding of the ones before it (the two initial-state
+        # responses with the resonance held far above the record) gets coefficient 0
+        keep = np.abs(np.diag(r_f)) > 1e-10 * np.linalg.norm(shared, axis=0)
+        if not keep[:2].all():
             return [self.project(t) for t in thetas]
+        if not keep.all():
+            q, r_f = np.linalg.qr(shared[:, keep])
         wn = math.exp(th0[IW])
         phi, b = linear_matrices(wn * wn, math.exp(th0[ITAU]) * wn * wn, self.dt)
         resp = linear_response(phi, b, -h, np.vstack([-h[0], np.zeros(h.shape[1])]))
@@ -310,7 +314,8 @@ class Problem:
         c_h = np.divide(perp.T @ y_perp, norm2, out=np.zeros_like(norm2), where=norm2 > 0)
         resid = y_perp[:, None] - perp * c_h
         cost = np.einsum("ij,ij->j", resid, resid) / self.y_scale**2
-        c_f = np.linalg.solve(r_f, qy[:, None] - q_resp * c_h)  # K, offset, x1_0, x2_0
+        c_f = np.zeros((4, len(thetas)))  # K, offset, x1_0, x2_0
+        c_f[keep] = np.linalg.solve(r_f, qy[:, None] - q_resp * c_h)
         out = []
         for g, t in enumerate(thetas):
             coef = np.array([c_f[0, g], c_h[g], c_f[1, g], c_f[2, g], c_f[3, g]])
