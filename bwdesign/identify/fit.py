@@ -398,7 +398,17 @@ def identify(
         seconds=time.perf_counter() - tic,
     )
     result = build_result(fit.prob, outcome, data=records, validation=valids, name=name)
-    bound, coverage, details = unexplained(result, fit.theta, records, valids, delay)
+    return replace(
+        _with_unexplained(result, fit.theta, records, valids, delay, extensions),
+        seconds=time.perf_counter() - tic,
+    )
+
+
+def _with_unexplained(result, theta, records, valids, delay, extensions):
+    """``result`` with the extensions document, the disturbance bound and the coverage."""
+    bound, coverage, details = unexplained(
+        result, theta, records, valids, delay, extensions=extensions
+    )
     note = coverage_note(coverage, details)
     if note:
         result = replace(result, diagnostics=(*result.diagnostics, note))
@@ -407,12 +417,7 @@ def identify(
         extensions["base"]["fit_heldout"] = result.fit_percent["validation"]
         extensions["final"]["fit_heldout"] = result.fit_percent["validation"]
     return replace(
-        result,
-        extensions=extensions,
-        disturbance=bound,
-        coverage=coverage,
-        unexplained=details,
-        seconds=time.perf_counter() - tic,
+        result, extensions=extensions, disturbance=bound, coverage=coverage, unexplained=details
     )
 
 

@@ -9,7 +9,8 @@ samples; the fast remainder is sensor noise) and mapped to the input through the
 static gain, ``d = smooth(e) / (a3/a1)`` (a slowly varying input disturbance
 reaches the output through the static gain). Then ``input_max = MARGIN max |d|``
 and ``rate_max = MARGIN max |d'|`` (central differences of the smoothed ``d``),
-over all records, with :data:`MARGIN`.
+over all records, with :data:`MARGIN`, plus the creep a fitted creep candidate
+could add at another input (:func:`creep_reserve`).
 
 **Coverage.** On the validation record(s) (offset and initial state re-estimated
 with the Bouc-Wen part), else on the last :data:`HOLDOUT` of each training record
@@ -38,12 +39,14 @@ from ..errors import BWDesignError
 from ..model.params import BoucWenParams
 from ..model.uncertainty import DisturbanceBound
 from .extend import HOLDOUT
+from .extstack import first_order_lag
 from .problem import Problem, delayed_input, theta_from_params
 from .result import IdentificationResult, validate_record
 from .stack import Stack
 
 __all__ = [
     "unexplained",
+    "creep_reserve",
     "coverage_note",
     "WINDOW_S",
     "MIN_WINDOW",
@@ -84,8 +87,13 @@ def unexplained(
     records: list,
     valids: list,
     delay: int,
+    extensions: dict[str, Any] | None = None,
 ) -> tuple[DisturbanceBound, float | None, dict[str, Any]]:
-    """The disturbance bound, the coverage and how both were computed (module docstring)."""
+    """The disturbance bound, the coverage and how both were computed (module docstring).
+
+    ``extensions``: the selection's document; a fitted creep candidate (chosen or
+    not) widens the bound by the creep its weights could add at another input.
+    """
     p = result.params
     gain = p.static_gain
     sign = math.copysign(1.0, p.a3)
@@ -112,6 +120,10 @@ def unexplained(
         fast.append(e - s)
     n_train = len(records)
     noise = float(np.sqrt(np.mean(np.concatenate(fast[:n_train]) ** 2)))
+    creep = creep_reserve(extensions, records, delay)
+    d_max += creep["input"] / abs(gain)
+    rate += creep["rate"] / abs(gain)
+    d_train += creep["input"] / abs(gain)
     bound = DisturbanceBound(MARGIN * d_max, MARGIN * rate, source="identified")
     half = abs(gain) * bound.input_max + NOISE_SIGMAS * noise
     outside, nominal_for, n_corners = _outside(result, held)
@@ -129,6 +141,7 @@ def unexplained(
         "margin": MARGIN,
         "static_gain": gain,
         "noise_std": noise,
+        "creep_reserve": creep,
         "band": {
             "heldout": (
                 "validation record(s)"
@@ -188,6 +201,40 @@ def _outside(result: IdentificationResult, held: list) -> tuple[np.ndarray, list
         parts.append(np.maximum(np.maximum(lo - y, y - hi), 0.0))
     out = np.concatenate(parts) if parts else np.zeros(0)
     return out, nominal_for, len(corners)
+
+
+def creep_reserve(extensions: dict[str, Any] | None, records: list, delay: int) -> dict[str, Any]:
+    """Creep the fitted bank could add beyond what the training records show (µm, µm/s).
+
+    Creep is slow and driven by the input: a record without holds (a sine) shows
+    only part of it, a step held until it settles shows all of it. With the fitted
+    weights ``c_i`` (chosen or not: the creep candidate's fit) and the training
+    input range ``R``, any input within that range gives ``|sum c_i (L_i u - u)| <=
+    sum |c_i| R`` and a rate up to ``sum |c_i| R / tau_i``; the reserve is that worst
+    case less the largest creep output and rate the training records show (those are
+    already in the residual's disturbance). Zero when no creep was fitted.
+    """
+    row = (extensions or {}).get("candidates", {}).get("creep", {})
+    weights, taus = row.get("weights"), row.get("taus_s")
+    if not weights:
+        return {"input": 0.0, "rate": 0.0, "worst": 0.0, "seen": 0.0}
+    u_lo = min(float(np.min(r.u)) for r in records)
+    u_hi = max(float(np.max(r.u)) for r in records)
+    worst = sum(abs(w) for w in weights) * (u_hi - u_lo)
+    worst_rate = sum(abs(w) / t for w, t in zip(weights, taus, strict=True)) * (u_hi - u_lo)
+    seen, seen_rate = 0.0, 0.0
+    for rec in records:
+        u = delayed_input(rec.u, delay)
+        c = sum(w * (first_order_lag(u, rec.dt, t) - u) for w, t in zip(weights, taus, strict=True))
+        seen = max(seen, float(np.max(np.abs(c))))
+        if c.size > 2:
+            seen_rate = max(seen_rate, float(np.max(np.abs(np.gradient(c, rec.dt)))))
+    return {
+        "input": max(0.0, worst - seen),
+        "rate": max(0.0, worst_rate - seen_rate),
+        "worst": worst,
+        "seen": seen,
+    }
 
 
 def coverage_note(coverage: float | None, details: dict[str, Any]) -> str | None:
