@@ -41,6 +41,7 @@ __all__ = [
     "advance",
     "discrete_observer_gains",
     "hysteresis_increment_batch",
+    "BatchHysteresis",
 ]
 
 
@@ -68,21 +69,43 @@ def hysteresis_increment_batch(alpha, beta, gamma, h, u0, u1):
         *(np.atleast_1d(np.asarray(v, dtype=float)) for v in (h, u0, u1))
     )
     with np.errstate(all="ignore"):
+        return BatchHysteresis(alpha, beta, gamma)(np.array(h), u0, u1)
+
+
+class BatchHysteresis:
+    """:func:`hysteresis_increment_batch` for fixed parameters, called once per sample.
+
+    What depends on the parameters only (``beta - gamma``, ``beta + gamma``, which
+    elements have ``beta = gamma``) is computed once; a call takes arrays of one
+    shape (``h`` is not modified) and runs inside the caller's
+    ``np.errstate(all="ignore")``. The same float operations per element as
+    :func:`bwdesign.hysteresis_increment`.
+    """
+
+    __slots__ = ("alpha", "cm", "cp", "flat")
+
+    def __init__(self, alpha, beta, gamma):
+        self.alpha = alpha
+        self.cm = beta - gamma
+        self.cp = beta + gamma
+        flat = np.asarray(self.cm == 0.0)
+        self.flat = flat if flat.any() else None
+
+    def __call__(self, h, u0, u1):
+        alpha, cm = self.alpha, self.cm
         du = u1 - u0
         s = np.copysign(1.0, du)
         g = s * h
         w = np.abs(du)
-        cm = beta - gamma
         arg = -cm * g / alpha
         wz = np.log1p(arg) / cm
         wz[~(arg > -1.0)] = np.inf
-        flat = cm == 0.0
-        if np.any(flat):
-            wz = np.where(flat, -g / alpha, wz)
+        if self.flat is not None:
+            wz = np.where(self.flat, -g / alpha, wz)
         neg = g < 0.0
         first = neg & (w <= wz)
         cross = neg & ~first
-        c = np.where(first, cm, beta + gamma)
+        c = np.where(first, cm, self.cp)
         g[cross] = 0.0  # g = s * h is this call's own array
         w = np.where(cross, w - wz, w)
         x = c * w
@@ -140,8 +163,7 @@ class LoopConstants:
         self.dist: Any = None
         m = loop.model
         if ops.batch:
-            hb = hysteresis_increment_batch
-            self.model_h = lambda h, u0, u1: hb(m.alpha, m.beta, m.gamma, h, u0, u1)
+            self.model_h = BatchHysteresis(m.alpha, m.beta, m.gamma)
         else:
             self.model_h = lambda h, u0, u1: hysteresis_increment(m, h, u0, u1)
 
@@ -154,12 +176,10 @@ class LoopConstants:
 
     def set_plants(self, T: dict[str, np.ndarray]) -> None:
         """A batch of true plants: arrays of their ZOH entries and hysteresis parameters."""
-        hb = hysteresis_increment_batch
         for name in ("p11", "p12", "p13", "p21", "p22", "p23"):
             setattr(self, name, T[name])
         self.pg1, self.pg2 = T["g1"], T["g2"]
-        a, b, g = T["alpha"], T["beta"], T["gamma"]
-        self.plant_h = lambda h, u0, u1: hb(a, b, g, h, u0, u1)
+        self.plant_h = BatchHysteresis(T["alpha"], T["beta"], T["gamma"])
 
 
 class LoopState:
