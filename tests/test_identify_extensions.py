@@ -112,6 +112,15 @@ def test_extensions_found_together_when_one_at_a_time_stays_biased():
     assert all(_inside(res))
 
 
+def test_lag_at_the_end_of_the_short_grid_is_rescored_fully():
+    # with a fast creep chosen first, the short refits put a 2-sample lag at the
+    # grid's first point ("not determined"); full refits find it
+    res = identify(_record(11, 6.0, amp_tau=2e-3, creep=(0.1, 0.0, 0.0)))
+    row = res.extensions["candidates"]["amplifier_lag"]
+    assert row["chosen"] and row["tau_s"] == pytest.approx(2e-3, rel=0.02)
+    assert all(_inside(res))
+
+
 @pytest.mark.slow
 def test_box_contains_truth_with_creep_and_lag_campaign():
     # 20 seeded 10 s records of a truth with creep and a 2 ms amplifier lag, no

@@ -11,7 +11,9 @@ from the base optimum:
    a predicted BIC change. A candidate whose columns lie within the model's own
    (less than :data:`SEPARABLE` of their norm outside) is *not determined*.
 2. **Fit** the best-screened one (the amplifier lag profiled over a grid of time
-   constants, creep weights and drifts in closed form) from the current optimum.
+   constants scored by short refits, by full ones when the best is at an end of
+   the grid, then polished to :data:`LAG_RTOL`; creep weights and drifts in closed
+   form) from the current optimum.
 3. **Choose** it only when both say so: the BIC on the output error with the
    effective sample count, ``BIC = n_eff ln(RSS/n) + k ln(n_eff)``,
    ``n_eff = n (1 - rho1)/(1 + rho1)`` from the current residual's lag-1
@@ -223,6 +225,11 @@ def _fit_candidate(m: _Model, name: str, ctx: _Ctx) -> tuple[_Model, str]:
     # profiled without it as well, and the delay of the lower misfit on the grid is kept
     grids = [_lag_grid(m, delay, ctx) for delay in sorted({0, m.delay})]
     delay, scored = min(grids, key=lambda g: min(c for c, _, _ in g[1]))
+    best = min(range(len(scored)), key=lambda j: scored[j][0])
+    if best in (0, len(scored) - 1):
+        # at an end of the range: the short refits may have stopped short; full ones decide
+        grids = [_lag_grid(m, delay, ctx, full=True) for delay in sorted({0, m.delay})]
+        delay, scored = min(grids, key=lambda g: min(c for c, _, _ in g[1]))
     return _profile_lag(m, delay, scored, ctx)
 
 
