@@ -19,7 +19,8 @@ holds; it only promises:
 - **Writing never fails.** A folder that cannot be created or written keeps nothing
   (:meth:`ResultCache.write` returns ``False``); nothing is written once the command
   line recorded a Ctrl-C (:func:`bwdesign.interrupts.pending`).
-- **Size.** After a write, the oldest entries beyond :data:`MAX_ENTRIES` are removed.
+- **Size.** After a write, the oldest entries beyond :data:`MAX_ENTRIES` are removed (a
+  report keeps two: its study and its figures).
   Only files whose names and first line are an entry's are ever removed or replaced:
   anything else in the folder is left alone.
 """
@@ -41,7 +42,7 @@ __all__ = ["ResultCache", "default_cache_dir", "CACHE_ENV", "MAX_ENTRIES"]
 #: Environment variable naming the cache folder.
 CACHE_ENV = "BWDESIGN_CACHE_DIR"
 #: Entries kept; a write removes the oldest beyond this many.
-MAX_ENTRIES = 64
+MAX_ENTRIES = 32
 
 _MAGIC = b"bwdesign-cache 1 "
 _NAME = re.compile(r"^[0-9a-f]{16,128}\.[a-z]{1,16}$")
