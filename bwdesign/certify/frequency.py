@@ -35,7 +35,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 
 __all__ = ["RankOneFamily", "continuous_family", "sampled_family"]
 
@@ -198,6 +197,8 @@ class RankOneFamily:
         best = float(np.max(vals))
         if enough is not None and enough(best):
             return best
+        from scipy.optimize import minimize_scalar  # here: bwdesign's import stays light
+
         idx = [
             i
             for i in range(len(om))
@@ -293,6 +294,8 @@ class RankOneFamily:
             k1 = np.array([k[0] for k in ks]) / self.w
             k2 = np.array([k[1] for k in ks]) / self.w
             return 1.0 + (k1 + k2) * G.real + k1 * k2 * np.abs(G) ** 2
+
+        from scipy.optimize import brentq  # here: bwdesign's import stays light
 
         om = self.grid(mu)
         G = self.G(om, mu)
