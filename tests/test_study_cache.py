@@ -247,3 +247,18 @@ def test_nothing_is_kept_after_ctrl_c(tmp_path, monkeypatch):
     store = ResultCache(tmp_path)
     assert store.write("ab" * 32, "study", b"x") is False
     assert store.entries() == []
+
+
+def test_check_and_report_share_one_entry_and_the_report_stays_the_same(computed, tmp_path):
+    """``check`` adds the parts its requirements read to the report's entry; the report
+    written from it afterwards is still the computed one."""
+    from bwdesign.testing.checks import check_requirements
+
+    cache, first = computed
+    checks = check_requirements(load_config(CONFIG), cache=cache)
+    assert checks and [p.suffix for p in cache.store.entries()].count(".study") == 1
+    write_report(load_config(CONFIG), tmp_path / "after", quiet=True, date=DATE, cache=cache)
+    assert _tree(tmp_path / "after") == first
+    assert [c.line() for c in check_requirements(load_config(CONFIG), cache=cache)] == [
+        c.line() for c in checks
+    ]
