@@ -55,6 +55,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_codegen.py
 	$(BIN)/python benchmarks/bench_sweep.py
 	$(BIN)/python benchmarks/bench_identify.py
+	$(BIN)/python benchmarks/bench_report.py
 
 # the sdist and the wheel (the wheel built from the sdist) into dist/, checked as an index would
 dist: $(STAMP)

@@ -44,7 +44,9 @@ SIM = [
 ]  # fmt: skip
 
 
-def _fake_build(config, out, *, allow_unbounded=False, quiet=False, date=None, out_dir=None):
+def _fake_build(
+    config, out, *, allow_unbounded=False, quiet=False, date=None, out_dir=None, cache=None
+):
     """Stand-in for the report's study and rendering: a figure, a document, a verdict."""
     figs = out / "figures"
     figs.mkdir(parents=True, exist_ok=True)

@@ -327,7 +327,7 @@ def test_tier_rows_when_synthesis_says_no(monkeypatch):
 
     calls = []
 
-    def fake(params, *, udot_max, decay, pole_radius, dt, allow_unbounded, tier):
+    def fake(params, *, udot_max, decay, pole_radius, dt, allow_unbounded, tier, explain=True):
         calls.append((tier, udot_max))
         edge = {"theorem1": 100.0, "lipschitz": 0.0, "sector": 50.0}[tier]
         ok = udot_max < edge

@@ -267,7 +267,8 @@ class SynthesisResult:
     binding : str or None
         ``None`` when feasible; otherwise the binding requirement:
         ``"decay"``, ``"pole_radius"``, ``"udot_max"``, ``"verification"`` or
-        ``"solver"``.
+        ``"solver"``; ``"unexplained"`` when ``synthesize(..., explain=False)`` did
+        not look for it.
     reason : str
         One sentence: what was certified, or which requirement cannot be met.
     max_decay : float or None

@@ -426,11 +426,19 @@ def _theorem1(
     )
 
 
-def _circle_envelope(fam: Any, lo: float, hi: float, mu: float, alpha0: float) -> float:
-    """Exact envelope (V/s) of the sector ``[lo v, hi v]`` at decay ``mu`` (circle criterion)."""
+def _circle_envelope(
+    fam: Any, lo: float, hi: float, mu: float, alpha0: float, below: float | None = None
+) -> float:
+    """Exact envelope (V/s) of the sector ``[lo v, hi v]`` at decay ``mu`` (circle criterion).
+
+    ``below``: only ``below < envelope`` is asked; the frequency search stops once it
+    is decided false (the value returned is then an upper bound of the envelope that
+    answers the question the same way).
+    """
     if not mu < alpha0:
         return 0.0
-    inv = fam.inverse_envelope(lo, hi, mu)
+    enough = None if below is None else (lambda inv: inv > 0 and not below < 1.0 / inv)
+    inv = fam.inverse_envelope(lo, hi, mu, enough=enough)
     return math.inf if inv <= 0 else 1.0 / inv
 
 
@@ -450,7 +458,9 @@ def _continuous_exact(
     alpha0 = -sc.spectral_abscissa()
 
     def rate() -> float:
-        return fam.largest_decay(lambda m: udot_max < _circle_envelope(fam, lo, hi, m, alpha0))
+        return fam.largest_decay(
+            lambda m: udot_max < _circle_envelope(fam, lo, hi, m, alpha0, below=udot_max)
+        )
 
     return _exact_tier(
         name,
@@ -534,7 +544,7 @@ def _sampled(
         return -math.expm1(x_hi) / dt, -math.expm1(x_lo) / dt
 
     def feasible(v: float, m: float) -> bool:
-        return m < cap and fam.min_q(*kfun(v), m) > 0
+        return m < cap and fam.min_q(*kfun(v), m, enough=lambda q: q <= 0) > 0
 
     if not decay < cap:
         env = 0.0

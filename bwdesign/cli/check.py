@@ -8,7 +8,8 @@ then ``--junit-xml`` is not written (the other files' lines are still printed).
 
 The command line becomes one frozen :class:`CheckRequest` (validated once); the
 argparse namespace is read, never changed. Each file's requirements are read from
-one study of it (:func:`bwdesign.testing.checks.check_requirements`).
+one study of it (:func:`bwdesign.testing.checks.check_requirements`), read from the
+study cache when kept there (:mod:`bwdesign.study.cache`; ``--no-cache`` computes it).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 from ..errors import BWDesignError
 from ..output.files import prepare_file
 from ..output.jsonenc import dump_json
+from ..study.cache import StudyCache
 from ..testing.checks import check_requirements
 from ..testing.junit import junit_xml
 from .args import EXIT_BAD_INPUT, EXIT_NO, EXIT_OK, UsageError
@@ -34,6 +36,11 @@ def check_args(p: argparse.ArgumentParser) -> None:
         "--junit-xml", metavar="PATH", default=None, help="write a JUnit XML report (not on exit 2)"
     )
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
+    p.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="compute each study even if it was kept in the study cache, and keep nothing",
+    )
 
 
 @dataclass(frozen=True)
@@ -48,11 +55,14 @@ class CheckRequest:
         Where to write the JUnit XML report.
     json : bool
         Print one JSON document instead of one line per requirement.
+    no_cache : bool
+        Compute the studies without the study cache (neither read nor kept).
     """
 
     files: tuple[str, ...]
     junit_xml: str | None = None
     json: bool = False
+    no_cache: bool = False
 
     def __post_init__(self) -> None:
         files = self.files
@@ -65,11 +75,18 @@ class CheckRequest:
             raise UsageError(f"--junit-xml must be a path, got {self.junit_xml!r}")
         if not isinstance(self.json, bool):
             raise UsageError(f"json must be true or false, got {self.json!r}")
+        if not isinstance(self.no_cache, bool):
+            raise UsageError(f"no_cache must be true or false, got {self.no_cache!r}")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> CheckRequest:
         """The request of parsed arguments (read only)."""
-        return cls(files=tuple(args.files), junit_xml=args.junit_xml, json=args.json)
+        return cls(
+            files=tuple(args.files),
+            junit_xml=args.junit_xml,
+            json=args.json,
+            no_cache=getattr(args, "no_cache", False),  # a namespace built by hand may lack it
+        )
 
 
 def run_check(args: argparse.Namespace) -> int:
@@ -82,9 +99,10 @@ def run_check(args: argparse.Namespace) -> int:
         )
     results = []
     bad = False
+    cache = None if req.no_cache else StudyCache()
     for f in req.files:
         try:
-            results.append((f, check_requirements(f)))
+            results.append((f, check_requirements(f, cache=cache)))
         except BWDesignError as err:
             # a file that cannot be checked is bad input; the others are still run
             results.append((f, " ".join(str(err).split())))

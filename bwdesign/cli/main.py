@@ -130,16 +130,27 @@ COMMANDS: list[Command] = [
 ]
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _command_word(argv: Sequence[str]) -> str | None:
+    """The subcommand ``argv`` names: its first word that is not an option (the program's
+    own options, ``--version`` and ``--help``, take no value)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand; given the command line ``argv``, only the options of
+    the subcommand it names are added (each command's options import its module, and a
+    report read from the study cache should not wait for the identification's imports)."""
     from .._version import __version__  # importlib.metadata: not before main() runs
 
+    word = None if argv is None else _command_word(argv)
     parser = Parser(prog="bwdesign", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"bwdesign {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="SUBCOMMAND", parser_class=Parser)
     sub.required = True
     for name, help_text, add_args, run in COMMANDS:
         p = sub.add_parser(name, help=help_text, description=help_text)
-        add_args(p)
+        if argv is None or name == word:
+            add_args(p)
         p.set_defaults(_run=run)
     return parser
 
@@ -156,7 +167,8 @@ def main(argv: Sequence[str] | None = None, *, then_ignore_sigint: bool = False)
     try:
         with interrupts.handling(then_ignore=then_ignore_sigint):
             try:
-                args = build_parser().parse_args(argv)
+                argv = sys.argv[1:] if argv is None else list(argv)
+                args = build_parser(argv).parse_args(argv)
                 code = args._run(args)
             except BaseException:
                 interrupts.check()  # an interrupt that surfaced as another error

@@ -5,6 +5,11 @@ argparse namespace is read, never changed. Exit codes: 0 the report says
 CERTIFIED; 1 it says no (not certified, synthesis infeasible, the reference needs
 more input than the limits allow), the report is written; 2 bad input, one
 ``error:`` line and nothing written.
+
+The study (and its figures) is read from the study cache when the same stage file
+was reported before by the same code and libraries (:mod:`bwdesign.study.cache`,
+in ``$BWDESIGN_CACHE_DIR``, else ``$XDG_CACHE_HOME/bwdesign``, else
+``~/.cache/bwdesign``); ``--no-cache`` computes it (and keeps nothing).
 """
 
 from __future__ import annotations
@@ -39,6 +44,12 @@ def report_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="compute the study even if it was kept in the study cache, and keep nothing "
+        "(the cache: $BWDESIGN_CACHE_DIR, else $XDG_CACHE_HOME/bwdesign or ~/.cache/bwdesign)",
+    )
+    p.add_argument(
         "--allow-unbounded",
         action="store_true",
         help="accept parameters outside the bounded Bouc-Wen class",
@@ -57,6 +68,8 @@ class ReportRequest:
     out : str
         The report directory, as given (checked by the output layer before any work).
     force, quiet, allow_unbounded : bool
+    no_cache : bool
+        Compute the study without the study cache (neither read nor kept).
     """
 
     config: str
@@ -64,12 +77,13 @@ class ReportRequest:
     force: bool = False
     quiet: bool = False
     allow_unbounded: bool = False
+    no_cache: bool = False
 
     def __post_init__(self) -> None:
         for name in ("config", "out"):
             if not isinstance(getattr(self, name), str):
                 raise UsageError(f"--{name} must be a path, got {getattr(self, name)!r}")
-        for name in ("force", "quiet", "allow_unbounded"):
+        for name in ("force", "quiet", "allow_unbounded", "no_cache"):
             if not isinstance(getattr(self, name), bool):
                 raise UsageError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
@@ -82,6 +96,7 @@ class ReportRequest:
             force=args.force,
             quiet=args.quiet,
             allow_unbounded=args.allow_unbounded,
+            no_cache=getattr(args, "no_cache", False),  # a namespace built by hand may lack it
         )
 
 
@@ -90,6 +105,7 @@ def run_report(args: argparse.Namespace) -> int:
     from ..model.config import load_config
     from ..output.files import prepare_directory
     from ..report.certified import write_report
+    from ..study.cache import StudyCache
 
     req = ReportRequest.from_args(args)
     # --out is checked before the stage file is read: a bad directory is said first
@@ -100,6 +116,7 @@ def run_report(args: argparse.Namespace) -> int:
         quiet=req.quiet,
         allow_unbounded=req.allow_unbounded,
         force=req.force,
+        cache=None if req.no_cache else StudyCache(),
     )
     print(f"{outcome.out_dir}/report.md: {outcome.verdict}")
     return EXIT_OK if outcome.certified else EXIT_NO

@@ -53,6 +53,7 @@ def synthesize(
     dt: float | None = None,
     allow_unbounded: bool = False,
     tier: str | None = None,
+    explain: bool = True,
 ) -> SynthesisResult:
     """Observer gains certified for ``|u'| <= udot_max`` with at least ``decay``.
 
@@ -103,6 +104,12 @@ def synthesize(
         constraint and is measured on the gains (no default region for them), and
         ``dt`` adds the discrete gains and the ``sampled`` re-certification, which
         feasibility then needs too.
+    explain : bool
+        ``False``: a "no" of the ``sector`` or ``sampled`` synthesis does not look
+        for the binding requirement (``binding = "unexplained"``, no
+        ``max_decay``/``max_udot``), which is most of the time of a "no"; for
+        searches that only need to know whether gains were found. A "yes" is the
+        same either way.
 
     Returns
     -------
@@ -148,13 +155,13 @@ def synthesize(
     if tier == "sampled" and dt is None:
         raise InputError("the sampled tier needs the sample time dt (s)")
     if dt is None or tier == "sector":
-        res = _synthesize_continuous(params, udot_max, decay, R, allow_unbounded)
+        res = _synthesize_continuous(params, udot_max, decay, R, allow_unbounded, explain)
         if dt is None:
             return res
         from .tiers import recertify_sampled
 
         return recertify_sampled(res, dt, allow_unbounded)
-    return _synthesize_sampled(params, udot_max, decay, R, dt, allow_unbounded)
+    return _synthesize_sampled(params, udot_max, decay, R, dt, allow_unbounded, explain)
 
 
 @dataclass(frozen=True)
@@ -245,9 +252,19 @@ def _expm1c(x: np.ndarray) -> np.ndarray:
 
 
 def _exact_score(
-    params: BoucWenParams, gains: tuple[float, float, float], v: float, mu: float, dt: float | None
+    params: BoucWenParams,
+    gains: tuple[float, float, float],
+    v: float,
+    mu: float,
+    dt: float | None,
+    sign_only: bool = True,
 ) -> float:
-    """Exact margin of the tier's criterion at ``(v, mu)``: > 0 when a certificate exists."""
+    """Exact margin of the tier's criterion at ``(v, mu)``: > 0 when a certificate exists.
+
+    ``sign_only``: a positive margin is exact, a non-positive one is some number <= 0
+    (the frequency search stops once the margin cannot be positive); ``False`` for
+    the exact margin whatever its sign (to rank candidates by it).
+    """
     try:
         gl = tuple(check_gains(params, gains).tolist())
     except GainError:
@@ -259,7 +276,8 @@ def _exact_score(
             return -math.inf
         fam = continuous_family(sc.Ahat, sc.w)
         a, b = min(0.0, params.beta - g), max(0.0, params.beta + g)
-        return 1.0 - v * fam.inverse_envelope(a, b, mu)
+        enough = (lambda inv: 1.0 - v * inv <= 0) if sign_only else None
+        return 1.0 - v * fam.inverse_envelope(a, b, mu, enough=enough)
     sp = prepare_sampled(params, discrete_gains(params, gl, dt), dt)
     fam = sampled_family(sp.Ad1, sp.b, sp.s, sp.w, dt)
     if not mu < fam.decay_cap():
@@ -267,7 +285,8 @@ def _exact_score(
     x_lo, x_hi = rho_exponents(params, v, dt)
     if not x_hi < 300.0:
         return -math.inf
-    return fam.min_q(-math.expm1(x_hi) / dt, -math.expm1(x_lo) / dt, mu)
+    enough = (lambda q: q <= 0) if sign_only else None
+    return fam.min_q(-math.expm1(x_hi) / dt, -math.expm1(x_lo) / dt, mu, enough=enough)
 
 
 class _Searched:
@@ -450,7 +469,7 @@ def _best_envelope(
     if c_coef == 0:
         return math.inf
     probe = 1e-3 * K_HAT_CAP * math.sqrt(params.a1) / c_coef
-    ranked = sorted(cands, key=lambda c: -_exact_score(params, c.gains, probe, decay, dt))
+    ranked = sorted(cands, key=lambda c: -_exact_score(params, c.gains, probe, decay, dt, False))
     for c in ranked[:BEST_OF]:
         if _exact_score(params, c.gains, best * (1 + 1e-3) if best > 0 else 1e-300, decay, dt) > 0:
             v, _ = largest_rate(
@@ -464,7 +483,12 @@ def _best_envelope(
 
 
 def _synthesize_continuous(
-    params: BoucWenParams, udot_max: float, decay: float, R: float, allow_unbounded: bool
+    params: BoucWenParams,
+    udot_max: float,
+    decay: float,
+    R: float,
+    allow_unbounded: bool,
+    explain: bool = True,
 ) -> SynthesisResult:
     from ..certify import lmi
 
@@ -500,11 +524,18 @@ def _synthesize_continuous(
         R=R,
         dt=None,
         allow_unbounded=allow_unbounded,
+        explain=explain,
     )
 
 
 def _synthesize_sampled(
-    params: BoucWenParams, udot_max: float, decay: float, R: float, dt: float, allow_unbounded: bool
+    params: BoucWenParams,
+    udot_max: float,
+    decay: float,
+    R: float,
+    dt: float,
+    allow_unbounded: bool,
+    explain: bool = True,
 ) -> SynthesisResult:
     from ..certify import lmi
 
@@ -544,6 +575,7 @@ def _synthesize_sampled(
         R=R,
         dt=dt,
         allow_unbounded=allow_unbounded,
+        explain=explain,
     )
 
 
@@ -564,10 +596,11 @@ def _conclude(
     R: float,
     dt: float | None,
     allow_unbounded: bool,
+    explain: bool = True,
 ) -> SynthesisResult:
     """The one ending of both syntheses: refine a feasible LMI design and verify its gains
     outside the solver; otherwise search the pole region with the exact criterion; otherwise
-    name the binding requirement (:func:`_diagnose`)."""
+    name the binding requirement (:func:`_diagnose`; with ``explain`` only)."""
     first = attempt(udot_max, decay, True)
     rejected = ""
     if first.ok:
@@ -580,6 +613,8 @@ def _conclude(
     found = _search(params, udot_max, decay, R, dt, allow_unbounded, first)
     if found is not None:
         return found
+    if not explain:
+        return _unexplained(params, tier, udot_max, decay, R, dt, first, rejected)
     return _diagnose(
         params,
         attempt,
@@ -590,6 +625,43 @@ def _conclude(
         dt=dt,
         first=first,
         rejected=rejected,
+    )
+
+
+def _unexplained(
+    params: BoucWenParams,
+    tier: str,
+    udot_max: float,
+    decay: float,
+    R: float,
+    dt: float | None,
+    first: _Attempt,
+    rejected: str,
+) -> SynthesisResult:
+    """A "no" whose binding requirement was not looked for (``explain=False``)."""
+    note = f"; the LMI design was rejected: {rejected}" if rejected else ""
+    return SynthesisResult(
+        feasible=False,
+        tier=tier,
+        gains=None,
+        discrete_gains=None,
+        udot_max=udot_max,
+        decay=decay,
+        pole_radius=R,
+        dt=dt,
+        binding="unexplained",
+        reason=(
+            f"no {tier} gains found within pole radius {R:g} rad/s at |u'| <= {udot_max:g} V/s "
+            f"with decay {decay:g} 1/s (LMI and pole-pattern search; the binding requirement "
+            f"was not looked for){note}"
+        ),
+        max_decay=None,
+        max_udot=None,
+        margin=first.t,
+        solver=first.sol.solver,
+        status=first.sol.status,
+        report=None,
+        params=params,
     )
 
 

@@ -37,7 +37,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..certify.checks import lipschitz_coefficient
-from ..certify.results import Margin, SynthesisResult
+from ..certify.results import TIERS, Margin, SynthesisResult
 from ..certify.tiers import certify
 from ..model.params import BoucWenParams
 from ..observers.gains import error_matrix
@@ -251,14 +251,39 @@ def recertify_sampled(res: SynthesisResult, dt: float, allow_unbounded: bool) ->
     ``sampled`` re-certification, which a feasible answer then needs too."""
     if not res.feasible:
         return replace(res, dt=dt)
-    report = certify(
-        res.params,
-        res.gains,
-        udot_max=res.udot_max,
-        decay=res.decay,
-        dt=dt,
-        allow_unbounded=allow_unbounded,
-    )
+    kept = res.report
+    continuous = TIERS[:3]
+    if (
+        kept is not None
+        and kept.dt is None
+        and tuple(c.name for c in kept.certificates) == continuous
+    ):
+        # the continuous tiers do not depend on dt: only the sampled one is new (the
+        # report is the one certify(..., dt=dt) returns, without computing them twice)
+        smp_only = certify(
+            res.params,
+            res.gains,
+            udot_max=res.udot_max,
+            decay=res.decay,
+            dt=dt,
+            tiers=("sampled",),
+            allow_unbounded=allow_unbounded,
+        )
+        report = replace(
+            kept,
+            dt=dt,
+            discrete_gains=smp_only.discrete_gains,
+            certificates=kept.certificates + smp_only.certificates,
+        )
+    else:
+        report = certify(
+            res.params,
+            res.gains,
+            udot_max=res.udot_max,
+            decay=res.decay,
+            dt=dt,
+            allow_unbounded=allow_unbounded,
+        )
     smp = report.tier("sampled")
     K = report.discrete_gains
     reason = f"{res.reason}; the observer sampled at dt = {dt:g} s (K = {K}): {smp.status}"

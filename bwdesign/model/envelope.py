@@ -28,7 +28,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from ..errors import InputError
 from ..validate import UDOT_MAX, Range, integer, real
@@ -120,6 +119,8 @@ def feedforward_input(
     # start on the linear inverse with the given hysteresis state
     u_k = (R[0] + a1 * h0) / a3
     h_k = h0
+    from scipy.optimize import brentq  # here: a study read from the cache never needs it
+
     for k in range(t.size):
         B = 1.0001 * max(abs(h_k), h_cap) + 1e-12
         lo, hi = sorted(((R[k] - a1 * B) / a3, (R[k] + a1 * B) / a3))

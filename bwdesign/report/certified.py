@@ -30,7 +30,9 @@ from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from ..output.text import gains_text, limits_text
 from ..study import REPORT_PARTS, Study, study
+from ..study.cache import StudyCache
 from .document import Document, fmt
+from .figures import FigureWriter, as_writer, keep_figures, kept_figures
 from .robust import robust_section
 from .summary import summary_block
 from .sweep import sweep_section
@@ -222,7 +224,7 @@ def _certificates_section(doc: Document, s: Study) -> None:
         doc.para(f"Theorem 1 for the configured gains: {t1.status}.")
 
 
-def _error_dynamics_section(doc: Document, s: Study, figs: Path, plotting: Any) -> None:
+def _error_dynamics_section(doc: Document, s: Study, figs: FigureWriter, plotting: Any) -> None:
     params = s.config.plant
     iu, v = params.input_unit, s.envelope.udot_max
     doc.heading("Observer error dynamics")
@@ -236,13 +238,17 @@ def _error_dynamics_section(doc: Document, s: Study, figs: Path, plotting: Any) 
             poles_by_label[f"{gs.label}, k = {k:.3g}"] = p
     bodes = {gs.label: gs.bode for gs in s.error_dynamics}
     doc.table(["gains", "k (1/s)", "poles of A - k e3 e3' (1/s)", "damping"], prow)
-    fig, _ = plotting.plot_error_poles(poles_by_label, title="observer error poles")
-    plotting.save_figure(fig, figs / "error_poles.png")
-    doc.figure(f"{figs.name}/error_poles.png", "Observer error poles at both ends of the sector")
-    fig, _ = plotting.plot_hysteresis_bode(
-        bodes, lipschitz_coeff=abs(params.beta) + abs(params.gamma), udot_max=v, input_unit=iu
+    figs.save(
+        "error_poles.png",
+        lambda: plotting.plot_error_poles(poles_by_label, title="observer error poles")[0],
     )
-    plotting.save_figure(fig, figs / "hysteresis_bode.png")
+    doc.figure(f"{figs.name}/error_poles.png", "Observer error poles at both ends of the sector")
+    figs.save(
+        "hysteresis_bode.png",
+        lambda: plotting.plot_hysteresis_bode(
+            bodes, lipschitz_coeff=abs(params.beta) + abs(params.gamma), udot_max=v, input_unit=iu
+        )[0],
+    )
     doc.figure(
         f"{figs.name}/hysteresis_bode.png",
         "Bode magnitude from the hysteresis error to eps3; its peak sets the lipschitz "
@@ -259,7 +265,7 @@ def _error_dynamics_section(doc: Document, s: Study, figs: Path, plotting: Any) 
     )
 
 
-def _loop_section(doc: Document, s: Study, figs: Path, plotting: Any) -> None:
+def _loop_section(doc: Document, s: Study, figs: FigureWriter, plotting: Any) -> None:
     loop, tuning, dt = s.loop, s.tuning, float(s.config.dt)
     doc.heading("Tracking loop")
     lrow = []
@@ -306,11 +312,13 @@ def _loop_section(doc: Document, s: Study, figs: Path, plotting: Any) -> None:
         f"{tuning.worst_delay_margin * 1e3:.3g} ms; requirements met: "
         f"{'yes' if tuning.met else 'no'}. {tuning.reasoning}"
     )
-    fig, _ = plotting.plot_loop_poles(
-        {"eq. 12 sampled": loop.sampled, "digital tuning": tuning.nominal},
-        title="tracking loop poles (z-plane)",
+    figs.save(
+        "loop_poles.png",
+        lambda: plotting.plot_loop_poles(
+            {"eq. 12 sampled": loop.sampled, "digital tuning": tuning.nominal},
+            title="tracking loop poles (z-plane)",
+        )[0],
     )
-    plotting.save_figure(fig, figs / "loop_poles.png")
     doc.figure(f"{figs.name}/loop_poles.png", "Closed-loop poles of the sampled tracking loops")
 
 
@@ -351,7 +359,7 @@ def _reproducibility_section(
 
 def render(
     study: Study,
-    figures_dir: str | Path,
+    figures_dir: str | Path | FigureWriter,
     *,
     date: str | None = None,
     out_dir: str | Path | None = None,
@@ -362,9 +370,11 @@ def render(
     ----------
     study : Study
         With every part the report shows (:data:`bwdesign.study.REPORT_PARTS`).
-    figures_dir : path
+    figures_dir : path or FigureWriter
         Where the figures are written (created); the document refers to them as
         ``<its name>/<figure>.png``, relative to its parent (the report's directory).
+        A :class:`~bwdesign.report.figures.FigureWriter` holding figures drawn before
+        for this study writes those instead of drawing them.
     date : str, optional
         The Date line (default: now, UTC).
     out_dir : path, optional
@@ -383,8 +393,7 @@ def render(
     missing = sorted(REPORT_PARTS - study.parts)
     if missing:
         raise InputError(f"the report needs the study's part(s) {', '.join(missing)}")
-    figs = Path(figures_dir)
-    figs.mkdir(parents=True, exist_ok=True)
+    figs = as_writer(figures_dir)
     doc = Document(f"Certified-gains report: {study.name}")
     doc.verdict(study.verdict.text, study.verdict.ok)
     top = len(doc.blocks)  # the summary goes here
@@ -442,15 +451,23 @@ def build_report(
     quiet: bool = False,
     date: str | None = None,
     out_dir: str | Path | None = None,
+    cache: StudyCache | None = None,
 ) -> tuple[Document, Study]:
     """Compute the study of ``config`` and render it, figures into ``out / "figures"``.
 
     ``out_dir``: the report's directory as the user named it (``out`` may be a
     staging folder inside it), for the reproducibility command's ``--out``.
-    Progress lines (``[report] ...``) go to stderr unless ``quiet``.
+    Progress lines (``[report] ...``) go to stderr unless ``quiet``. ``cache``: read
+    the study and its figures from the study cache when kept there, and keep them
+    (:mod:`bwdesign.study.cache`, :mod:`bwdesign.report.figures`).
     """
-    s = study(config, allow_unbounded=allow_unbounded, progress=_progress(quiet))
-    return render(s, Path(out) / "figures", date=date, out_dir=out_dir), s
+    s = study(config, allow_unbounded=allow_unbounded, progress=_progress(quiet), cache=cache)
+    kept = kept_figures(cache, s.cache_key)
+    figs = FigureWriter(Path(out) / "figures", kept)
+    doc = render(s, figs, date=date, out_dir=out_dir)
+    if set(figs.written) - set(kept or {}):
+        keep_figures(cache, s.cache_key, figs)
+    return doc, s
 
 
 def write_report(
@@ -461,6 +478,7 @@ def write_report(
     quiet: bool = False,
     date: str | None = None,
     force: bool = False,
+    cache: StudyCache | None = None,
 ) -> ReportOutcome:
     """Write the report for ``config`` into ``out_dir`` through the safe output layer.
 
@@ -483,6 +501,9 @@ def write_report(
     force : bool
         Write into a directory that holds files bwdesign did not write; they
         are kept, never overwritten.
+    cache : StudyCache, optional
+        Read the study and its figures from the study cache when this very study
+        was kept there, and keep them (never in ``out_dir``); default: no cache.
 
     Returns
     -------
@@ -507,6 +528,7 @@ def write_report(
             quiet=quiet,
             date=date,
             out_dir=out_dir,
+            cache=cache,
         )
         stage.write_text("certificate.json", dump_json(s.to_dict()) + "\n")
         stage.write_text("report.md", doc.to_markdown())

@@ -15,6 +15,7 @@ from ..sim.sweep import SweepSpec
 from ..study import Study
 from ..study.sweep import sweep_summary
 from .document import Document
+from .figures import FigureWriter, as_writer
 
 __all__ = ["sweep_document", "sweep_section", "write_sweep"]
 
@@ -43,13 +44,13 @@ def _quantile_table(doc: Document, summary: Mapping[str, Any]) -> None:
     doc.table(header, body)
 
 
-def sweep_section(doc: Document, study: Study, figs: Path) -> None:
+def sweep_section(doc: Document, study: Study, figs: FigureWriter | Path) -> None:
     """The certified-gains report's ``[sweep]`` section (:attr:`Study.sweep`).
 
-    The histogram figure is written into ``figs``.
+    The histogram figure is written into ``figs`` (a folder, or a
+    :class:`~bwdesign.report.figures.FigureWriter`).
     """
-    from ..plotting import figures as plotting
-    from ..plotting.sweep import plot_sweep_histograms
+    figs = as_writer(figs)
 
     part = study.sweep
     spec, bounds, summary = part.spec, part.bounds, part.summary
@@ -69,8 +70,13 @@ def sweep_section(doc: Document, study: Study, figs: Path) -> None:
     )
     _quantile_table(doc, summary)
     _envelope_para(doc, spec, summary, n, replays=False)
-    fig, _ = plot_sweep_histograms(dict(part.table), length_unit=lu, title="stable scenarios")
-    plotting.save_figure(fig, figs / "sweep_histograms.png")
+
+    def draw() -> Any:
+        from ..plotting.sweep import plot_sweep_histograms
+
+        return plot_sweep_histograms(dict(part.table), length_unit=lu, title="stable scenarios")[0]
+
+    figs.save("sweep_histograms.png", draw)
     doc.figure(f"{figs.name}/sweep_histograms.png", f"ME, MAXE and RMSE ({lu}) over the scenarios")
 
 

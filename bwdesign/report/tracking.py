@@ -14,6 +14,7 @@ from ..output.text import limits_text
 from ..study import Study
 from ..study.tracking import input_limits
 from .document import Document, fmt
+from .figures import FigureWriter, as_writer
 
 __all__ = ["tracking_section", "ESTIMATION_DECADES"]
 
@@ -22,14 +23,16 @@ __all__ = ["tracking_section", "ESTIMATION_DECADES"]
 ESTIMATION_DECADES = 12
 
 
-def tracking_section(doc: Document, study: Study, figs: Path) -> None:
+def tracking_section(doc: Document, study: Study, figs: FigureWriter | Path) -> None:
     """Add the report's "Simulated tracking at the envelope" section for the study's runs.
 
     The table (one row per run, ``id="tracking"``), the commands that reproduce
     the runs, and the figures ``tracking.png`` and ``estimation_errors.png``
-    written into ``figs``.
+    written into ``figs`` (a folder, or a :class:`~bwdesign.report.figures.FigureWriter`).
     """
     from ..plotting import figures as plotting
+
+    figs = as_writer(figs)
 
     config, runs = study.config, study.tracking
     params, ref, dt = config.plant, config.reference, float(config.dt)
@@ -80,8 +83,12 @@ def tracking_section(doc: Document, study: Study, figs: Path) -> None:
     )
     doc.pre("\n".join(f"# {run.label}\n{run.command_text}" for run in runs))
     runs_by_label = {run.label: run.result for run in runs}
-    fig, _ = plotting.plot_tracking_comparison(runs_by_label, title="tracking at the envelope")
-    plotting.save_figure(fig, figs / "tracking.png")
+    figs.save(
+        "tracking.png",
+        lambda: plotting.plot_tracking_comparison(runs_by_label, title="tracking at the envelope")[
+            0
+        ],
+    )
     doc.figure(f"{figs.name}/tracking.png", "Tracking, error and input over the metrics window")
     _estimation_figure(doc, runs_by_label, figs, lu, plotting)
 
@@ -98,7 +105,7 @@ def _row(run: Any) -> list[str]:
 
 
 def _estimation_figure(
-    doc: Document, results: dict[str, Any], figs: Path, lu: str, plotting: Any
+    doc: Document, results: dict[str, Any], figs: FigureWriter, lu: str, plotting: Any
 ) -> None:
     """The estimation error of each state of every bounded run (or a sentence: none)."""
     curves = {}
@@ -115,14 +122,16 @@ def _estimation_figure(
     if not curves:
         doc.para("No run stayed bounded, so there is no estimation-error figure.")
         return
-    fig, _ = plotting.plot_estimation_errors(
-        curves,
-        title="estimation errors in the loop",
-        ylabel=panels,
-        stack=True,
-        decades=ESTIMATION_DECADES,
+    figs.save(
+        "estimation_errors.png",
+        lambda: plotting.plot_estimation_errors(
+            curves,
+            title="estimation errors in the loop",
+            ylabel=panels,
+            stack=True,
+            decades=ESTIMATION_DECADES,
+        )[0],
     )
-    plotting.save_figure(fig, figs / "estimation_errors.png")
     doc.figure(f"{figs.name}/estimation_errors.png", "Estimation error of each state in the loop")
 
 

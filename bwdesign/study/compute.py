@@ -24,6 +24,7 @@ from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
+from .cache import StudyCache
 from .result import (
     DEFAULT_DECAY,
     PARTS,
@@ -411,6 +412,7 @@ def study(
     parts: Iterable[str] | None = None,
     progress: Callable[[str], None] | None = None,
     settings: StudySettings | None = None,
+    cache: StudyCache | None = None,
 ) -> Study:
     """Compute the study of a stage: everything the certified-gains report shows.
 
@@ -427,6 +429,10 @@ def study(
     settings : StudySettings, optional
         What the checks ask beyond the file; default the stage's ``[requirements]``
         tracking settings, certificates at decay 0.
+    cache : StudyCache, optional
+        Read the parts kept for this very study (same stage file, settings, code and
+        libraries: :mod:`bwdesign.study.cache`) instead of computing them, and keep
+        the ones computed. Default: no cache.
 
     Returns
     -------
@@ -445,16 +451,29 @@ def study(
         settings = StudySettings.from_requirements(config.requirements)
     elif not isinstance(settings, StudySettings):
         raise InputError(f"settings must be a StudySettings, got {type(settings).__name__}")
+    if cache is not None and not isinstance(cache, StudyCache):
+        raise InputError(f"cache must be a StudyCache or None, got {type(cache).__name__}")
     asked = _asked(parts)
     r = _Run(config, bool(allow_unbounded), settings, progress)
+    key, kept = None, {}
+    if cache is not None:
+        key = cache.key(config, r.allow_unbounded, settings, versions())
+        kept = (cache.load(key) or {}) if key is not None else {}
+        r.done.update(kept)
     _preflight(r, asked)
+    if kept and asked <= set(kept):
+        r.say(f"study read from the cache ({cache.store.root}; --no-cache computes it)")
     for part in PARTS:
         if part in asked:
             r.compute(part)
+    if key is not None and set(r.done) - set(kept):
+        cache.save(key, r.done)
     return Study(
         config=config,
         allow_unbounded=r.allow_unbounded,
         settings=settings,
         parts=frozenset(r.done),
+        cache_key=key,
+        cached=frozenset(kept),
         **r.done,
     )

@@ -12,7 +12,7 @@ part that does not apply to the stage (no ``[sweep]``, no ``[uncertainty]``, no
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -404,6 +404,11 @@ class Study:
         Python and the libraries the numbers came from.
     corner_tracking : CornerTracking
         The requirements' tracking runs (not in the report).
+    cache_key : str or None
+        The key of this study in the study cache (:mod:`bwdesign.study.cache`); None
+        when computed without one.
+    cached : frozenset of str
+        The parts read from the cache rather than computed (empty without one).
     """
 
     config: StageConfig
@@ -427,6 +432,8 @@ class Study:
     recommendation: Recommendation | None = None
     versions: Mapping[str, str] | None = None
     corner_tracking: CornerTracking | None = None
+    cache_key: str | None = field(default=None, compare=False)
+    cached: frozenset[str] = field(default=frozenset(), compare=False)
 
     def get(self, part: str) -> Any:
         """The part ``part``; raises :class:`InputError` when it was not computed."""

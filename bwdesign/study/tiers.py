@@ -152,7 +152,7 @@ def synthesize_per_tier(
     rows = []
     for tier in tiers:
 
-        def run(u: float, tier: str = tier) -> SynthesisResult:
+        def run(u: float, tier: str = tier, explain: bool = True) -> SynthesisResult:
             return synthesize(
                 params,
                 udot_max=u,
@@ -161,7 +161,13 @@ def synthesize_per_tier(
                 dt=dt,
                 allow_unbounded=allow_unbounded,
                 tier=tier,
+                explain=explain,
             )
+
+        def probe(u: float, tier: str = tier) -> SynthesisResult:
+            # a search step's "no" is never shown (a row's reason is its first
+            # synthesis' or its best's), so it is not explained
+            return run(u, tier, explain=False)
 
         first = run(udot_max)
         tried = [(udot_max, first)]
@@ -173,7 +179,7 @@ def synthesize_per_tier(
         elif not math.isinf(_envelope(first, tier)):
             searched = True
             tried += search_requested_rate(
-                run, udot_max, first.feasible, jump=_envelope(first, tier)
+                probe, udot_max, first.feasible, jump=_envelope(first, tier)
             )
         best_u, best = max(tried, key=lambda ur: _envelope(ur[1], tier))
         ok = best.feasible

@@ -31,6 +31,7 @@ from ..model.params import PRESETS, BoucWenParams, preset
 from ..model.requirements import REQUIREMENT_KEYS
 from ..observers.gains import hurwitz_violations
 from ..study import Study, StudySettings, study
+from ..study.cache import StudyCache
 
 __all__ = [
     "Check",
@@ -415,10 +416,11 @@ def _min_decay(c: Check, limit: float) -> Check:
     return Check(c.stage, "min_decay", v >= limit, v, limit, text)
 
 
-def check_requirements(stage: Any) -> list[Check]:
+def check_requirements(stage: Any, *, cache: StudyCache | None = None) -> list[Check]:
     """Every requirement of the stage's ``[requirements]`` section, in the schema's order.
 
-    One study of the stage, with the parts the requirements read, behind every check.
+    One study of the stage, with the parts the requirements read, behind every check
+    (read from and kept in ``cache`` when given: :mod:`bwdesign.study.cache`).
     """
     config = as_stage(stage)
     req = config.requirements
@@ -438,7 +440,7 @@ def check_requirements(stage: Any) -> list[Check]:
         _need_margins(config)
         parts.add("loop")
     why = _not_hurwitz(config, config.gains) if parts else None
-    s = None if why is not None or not parts else study(config, parts=parts)
+    s = None if why is not None or not parts else study(config, parts=parts, cache=cache)
     out: list[Check] = []
     if certified:
         c = _not_certified(config, None, why) if s is None else _certified(config, s, None, 0.0)

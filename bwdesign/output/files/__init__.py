@@ -79,8 +79,13 @@ Known limits: the checks and the final moves are separate system calls, so a
 file another process creates at the same path in between can still be
 replaced (the window is the commit phase). Hard links are not followed: a
 replaced file that had other links leaves those links with the old contents.
+
+The result cache (:mod:`.cache`, :class:`ResultCache`) is the one place bwdesign
+keeps files between runs that are not a command's output: entries in a cache folder
+(never an output directory), written atomically, and a damaged entry is a miss.
 """
 
+from .cache import ResultCache, default_cache_dir
 from .common import MANIFEST
 from .directory import DirectoryTarget, Stage, prepare_directory
 from .single import FileTarget, prepare_file, signature_line
@@ -91,7 +96,9 @@ __all__ = [
     "STAGING_PREFIX",
     "DirectoryTarget",
     "FileTarget",
+    "ResultCache",
     "Stage",
+    "default_cache_dir",
     "prepare_directory",
     "prepare_file",
     "signature_line",

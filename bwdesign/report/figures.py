@@ -1,0 +1,94 @@
+"""Writing a report's figures: drawn, or the bytes drawn before for the very same study.
+
+A figure is a pure function of the study it shows, so a report whose study was read
+from the study cache (:mod:`bwdesign.study.cache`) also reads the figures drawn for it
+(kept under the study's key, kind ``figures``) instead of drawing them again: a
+report written from the cache is byte for byte the one computed without it, and
+matplotlib is not even imported. Figures are drawn (by :mod:`bwdesign.plotting`) only
+when they were not kept.
+"""
+
+from __future__ import annotations
+
+import pickle
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+__all__ = ["FigureWriter", "as_writer", "kept_figures", "keep_figures"]
+
+#: The cache entry kind of a study's figures.
+FIGURES_KIND = "figures"
+
+
+class FigureWriter:
+    """Writes figures into one folder (a staging folder of the output layer).
+
+    Parameters
+    ----------
+    folder : path
+        Created when missing.
+    kept : mapping of str to bytes, optional
+        Figures already drawn for this study, by file name: written as they are.
+    """
+
+    def __init__(self, folder: str | Path, kept: Mapping[str, bytes] | None = None) -> None:
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.kept = dict(kept or {})
+        self.written: dict[str, Path] = {}
+
+    @property
+    def name(self) -> str:
+        """The folder's name (documents refer to ``<name>/<figure>``)."""
+        return self.folder.name
+
+    def save(self, filename: str, draw: Callable[[], Any]) -> None:
+        """Write ``filename``: the kept bytes, else the figure ``draw()`` returns."""
+        path = self.folder / filename
+        data = self.kept.get(filename)
+        if isinstance(data, bytes):
+            path.write_bytes(data)
+        else:
+            from ..plotting.figures import save_figure
+
+            save_figure(draw(), path)
+        self.written[filename] = path
+
+    def contents(self) -> dict[str, bytes]:
+        """The bytes of every figure written, by file name."""
+        return {name: path.read_bytes() for name, path in self.written.items()}
+
+
+def as_writer(figs: FigureWriter | str | Path) -> FigureWriter:
+    """A :class:`FigureWriter` for a folder given as a path (or the writer itself)."""
+    return figs if isinstance(figs, FigureWriter) else FigureWriter(figs)
+
+
+def kept_figures(cache: Any, key: str | None) -> dict[str, bytes] | None:
+    """The figures kept for the study ``key`` in ``cache`` (a StudyCache), or ``None``."""
+    if cache is None or key is None:
+        return None
+    payload = cache.read_extra(key, FIGURES_KIND)
+    if payload is None:
+        return None
+    try:
+        kept = pickle.loads(payload)
+    except Exception:  # noqa: BLE001 - an entry that does not load is a miss
+        return None
+    if not isinstance(kept, dict) or not all(
+        isinstance(k, str) and isinstance(v, bytes) for k, v in kept.items()
+    ):
+        return None
+    return kept
+
+
+def keep_figures(cache: Any, key: str | None, writer: FigureWriter) -> bool:
+    """Keep the figures ``writer`` wrote for the study ``key`` (``False``: not kept)."""
+    if cache is None or key is None:
+        return False
+    try:
+        payload = pickle.dumps(writer.contents(), protocol=pickle.HIGHEST_PROTOCOL)
+    except OSError:
+        return False
+    return cache.write_extra(key, FIGURES_KIND, payload)
