@@ -558,8 +558,10 @@ def _run_dask(spec, pieces, slices, workers, scheduler, retries, timeout, progre
                 ) from None
             client = Client(cluster)
         with client:
+            # the spec (loops, reference, box) goes to every worker once, not with each chunk
+            shared = client.scatter(spec, broadcast=True, hash=False)
             futures = {
-                client.submit(run_chunk, spec, piece, retries=retries, pure=False): i
+                client.submit(run_chunk, shared, piece, retries=retries, pure=False): i
                 for i, piece in enumerate(pieces)
             }
             parts: list[Any] = [None] * len(pieces)
