@@ -62,8 +62,13 @@ def _build(out: Path, *extra: str) -> Path:
     return exe
 
 
-def _run(exe: Path, mode: str, rows: np.ndarray) -> np.ndarray:
-    text = "\n".join(",".join(map(repr, r)) for r in np.asarray(rows, float).tolist()) + "\n"
+def _text(rows: np.ndarray) -> str:
+    """The harness's input: one line per step, each value as repr (exact)."""
+    return "\n".join(",".join(map(repr, r)) for r in np.asarray(rows, float).tolist()) + "\n"
+
+
+def _run(exe: Path, mode: str, rows: np.ndarray | str) -> np.ndarray:
+    text = rows if isinstance(rows, str) else _text(rows)
     res = subprocess.run([str(exe), mode], input=text, capture_output=True, text=True, check=True)
     return np.loadtxt(res.stdout.splitlines(), delimiter=",", ndmin=2)
 
@@ -95,7 +100,7 @@ def _frozen(a) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def records(config):
-    """Per input of _inputs: (u, z), the plant simulated once for every observer test.
+    """Per input of _inputs: (u, z, the harness input), simulated once for every observer test.
 
     z is the exact-model output with 10 nm sensor noise, drawn from the same seeded
     generator after the inputs, input by input (read-only arrays).
@@ -106,7 +111,7 @@ def records(config):
     for name, u in _inputs(dt, rng).items():
         X = simulate_zoh(p, u, dt, x0=np.zeros(3))
         z = X[1:, 0] + rng.normal(0, 0.01, N)  # 10 nm sensor noise
-        out[name] = (_frozen(u), _frozen(z))
+        out[name] = (_frozen(u), _frozen(z), _text(np.column_stack([u, z])))
     return out
 
 
@@ -129,7 +134,7 @@ def python_estimates(config, records):
             cls, gains = observers[mode]
             cache[mode] = {
                 name: _frozen(cls(p, gains, dt).batch_filter(z, u))
-                for name, (u, z) in records.items()
+                for name, (u, z, _) in records.items()
             }
         return cache[mode]
 
@@ -153,9 +158,9 @@ def builds(tmp_path_factory, config):
 @pytest.mark.parametrize("cls", [HysteresisObserver, ExtendedStateObserver], ids=["phso", "eso"])
 def test_observer_matches_python(builds, records, python_estimates, precision, tol, cls):
     mode = "phso" if cls is HysteresisObserver else "eso"
-    for name, (u, z) in records.items():
+    for name, (_, _, rows) in records.items():
         ref = python_estimates(mode)[name]
-        got = _run(builds[precision], mode, np.column_stack([u, z]))
+        got = _run(builds[precision], mode, rows)
         scale = np.ptp(ref, axis=0)
         err = np.max(np.abs(got - ref), axis=0) / scale
         assert got.shape == ref.shape
@@ -174,9 +179,9 @@ def test_phdo_matches_python(builds, records, python_estimates, precision, tol):
     rounding of the model constants (a static-gain error of ~1e-7, i.e. ~1 ulp of x1):
     its error is ~2e-5 um, 3e-4 to 5e-4 of its own range (the bench prints it).
     """
-    for name, (u, z) in records.items():
+    for name, (_, _, rows) in records.items():
         ref = python_estimates("phdo")[name]
-        got = _run(builds[precision], "phdo", np.column_stack([u, z]))
+        got = _run(builds[precision], "phdo", rows)
         assert got.shape == ref.shape == (N, 4)
         err = np.max(np.abs(got - ref), axis=0)
         lumped_ref, lumped = ref[:, 2] + ref[:, 3], got[:, 2] + got[:, 3]
@@ -246,7 +251,8 @@ def test_closed_loop_with_phdo_matches_python(builds, phdo_loop_run, precision, 
 
 @pytest.fixture(scope="module")
 def controller_inputs(config):
-    """The controllers' inputs (noisy estimates, a 1 Hz sine) and each law's Python output.
+    """The controllers' inputs (noisy estimates, a 1 Hz sine) as the harness reads them,
+    and each law's Python output.
 
     Computed once for both precisions (read-only arrays).
     """
@@ -264,7 +270,7 @@ def controller_inputs(config):
         ("eq12", TrackingController(p, c.lambda1, c.lambda2)),
     ):
         refs[mode] = _frozen([ctl(r[:3], tuple(r[3:])) for r in rows])
-    return _frozen(rows), refs
+    return _text(rows), refs
 
 
 @needs_cc
