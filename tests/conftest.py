@@ -17,6 +17,7 @@ returns fresh objects (parsed text, copies), so no test can change what another 
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import shutil
@@ -98,6 +99,23 @@ def experiment():
 @pytest.fixture
 def simulation():
     return preset("paper_simulation_corrected")
+
+
+@pytest.fixture(scope="session")
+def paper_tuning_session():
+    """``digital_tuning(preset("paper_experiment"), 2e-4)``, computed once per process
+    (1.3 s); for module fixtures that only read it (tests take :func:`paper_tuning`)."""
+    from bwdesign import digital_tuning
+
+    return digital_tuning(preset("paper_experiment"), 2e-4)
+
+
+@pytest.fixture
+def paper_tuning(paper_tuning_session):
+    """The paper stage's digital tuning at 0.2 ms (:func:`paper_tuning_session`), a copy
+    for each test. For tests that use the tuning; the tests of digital_tuning itself
+    (tests/test_loop.py) call it."""
+    return copy.deepcopy(paper_tuning_session)
 
 
 def pytest_collection_modifyitems(config, items):

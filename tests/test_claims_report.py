@@ -62,10 +62,10 @@ def test_report_allow_unbounded_is_passed_through(tmp_path, capsys):
 
 
 @pytest.fixture(scope="module")
-def report_runs():
+def report_runs(paper_tuning_session):
     """The report's tracking runs, computed again here (the report's own are files)."""
     config = load_config(CONFIG)
-    return tracking_runs(config, gains=config.gains, tuning=digital_tuning(config.plant, config.dt))
+    return tracking_runs(config, gains=config.gains, tuning=paper_tuning_session)
 
 
 @pytest.fixture
@@ -101,13 +101,12 @@ def test_report_commands_reproduce_its_runs(paper, capsys):
         assert got["estimation_rmse"]["x3"] == pytest.approx(r.estimation_rmse[2], abs=1e-9)
 
 
-def test_report_runs_the_phdo_with_gains_from_the_one_helper(paper):
+def test_report_runs_the_phdo_with_gains_from_the_one_helper(paper, paper_tuning):
     """{eq. 12, digital tuning} x {PHSO, ESO, PHDO}; the PHDO's gains are (l1, l2, 0, l3)."""
     from bwdesign.observers.gains import disturbance_gains_from
 
     md, _, runs = paper
-    config = load_config(CONFIG)
-    tuning = digital_tuning(config.plant, config.dt)
+    tuning = paper_tuning  # digital_tuning(config.plant, config.dt)
     labels = [run.label for run in runs]
     assert labels == [
         f"{o} ({law})" for law in ("eq. 12", "digital tuning") for o in ("PHSO", "ESO", "PHDO")

@@ -284,9 +284,8 @@ def test_controllers_match_python(builds, controller_inputs, precision, tol):
 
 
 @needs_cc
-def test_digital_tuning_with_integral_and_saturation(tmp_path, config):
+def test_digital_tuning_with_integral_and_saturation(tmp_path, config, paper_tuning):
     """The digital-tuning form (integral action) and amplifier limits, against Python."""
-    from bwdesign import digital_tuning
     from bwdesign.model.config import ControllerSettings
 
     cfg = replace(
@@ -294,7 +293,7 @@ def test_digital_tuning_with_integral_and_saturation(tmp_path, config):
     )
     res = export_c(cfg, tmp_path, gains_from="digital")
     exe = _build(tmp_path)
-    tune = digital_tuning(cfg.plant, cfg.dt)
+    tune = paper_tuning  # digital_tuning(cfg.plant, cfg.dt)
     ctl = DiscreteTrackingController(
         cfg.plant,
         tune.lambda1,
@@ -574,12 +573,10 @@ def test_harness_default_observer_phdo(tmp_path, capsys, config):
     assert doc["certificate"]["phdo"]["certified"] and doc["certificate"]["certified"]
 
 
-def test_phdo_gains_per_source(tmp_path, config):
+def test_phdo_gains_per_source(tmp_path, config, paper_tuning):
     """--tuning digital: observer_gains_for("phdo"); --synthesize: the synthesised K lumped."""
-    from bwdesign import digital_tuning
-
     res = export_c(config, tmp_path / "digital", gains_from="digital")
-    g = digital_tuning(config.plant, config.dt).observer_gains_for("phdo")
+    g = paper_tuning.observer_gains_for("phdo")  # digital_tuning(config.plant, config.dt)
     phdo = res.document["observers"]["phdo"]
     assert phdo["gains"] == list(g) and "observer_gains_for('phdo')" in phdo["gains_from"]
     assert phdo["K"] == DisturbanceHysteresisObserver(config.plant, g, config.dt).K.tolist()

@@ -22,7 +22,6 @@ from bwdesign import (
     simulate,
     simulate_zoh,
 )
-from bwdesign.design import digital_tuning
 from bwdesign.errors import GainError, InputError
 from bwdesign.observers.gains import discrete_gains
 
@@ -148,8 +147,8 @@ def tuned_loop(tu, observer, **kw):
 
 
 @pytest.mark.parametrize("mismatch", [False, True])
-def test_fast_and_generic_paths_agree(mismatch):
-    tu = digital_tuning(P, DT)
+def test_fast_and_generic_paths_agree(mismatch, paper_tuning):
+    tu = paper_tuning
     tp = P.replace(a1=P.a1 * 1.02, a3=P.a3 * 0.98, gamma=P.gamma * 1.1) if mismatch else None
     lp = tuned_loop(tu, "phdo", delay=True)
     assert lp.observer.gains == tu.observer_gains_for("phdo")
@@ -162,8 +161,8 @@ def test_fast_and_generic_paths_agree(mismatch):
     np.testing.assert_allclose(runs[0].u, runs[1].u, rtol=0, atol=1e-9)
 
 
-def test_tuning_gains_for_phdo():
-    tu = digital_tuning(P, DT)
+def test_tuning_gains_for_phdo(paper_tuning):
+    tu = paper_tuning
     l1, l2, l3 = tu.gains
     assert tu.observer_gains_for("phdo") == (l1, l2, 0.0, l3)
     with pytest.raises(InputError):
@@ -191,13 +190,13 @@ def _cli(*args):
     )
 
 
-def test_cli_tuning_digital_reports_what_it_used():
+def test_cli_tuning_digital_reports_what_it_used(paper_tuning):
     base = ["--plant", "paper_experiment", "--amplitude", "80", "--offset", "100"]
     base += ["--frequency", "1", "--dt", "2e-4", "--duration", "0.6", "--delay", "--json"]
     res = _cli(*base, "--observer", "phdo", "--tuning", "digital")
     assert res.returncode == 0, res.stderr
     doc = json.loads(res.stdout)
-    tu = digital_tuning(P, DT)
+    tu = paper_tuning
     assert doc["tuning"]["gains"] == list(tu.observer_gains_for("phdo"))
     assert doc["tuning"]["lambda1"] == tu.lambda1 and doc["tuning"]["form"] == "discrete"
     assert doc["observer"] == "phdo"
@@ -207,8 +206,7 @@ def test_cli_tuning_digital_reports_what_it_used():
     assert bad.returncode == 2 and "takes 4 gains" in bad.stderr
 
 
-def _table2_row(ref, true, noise):
-    tu = digital_tuning(P, DT)
+def _table2_row(tu, ref, true, noise):
     out = {}
     for o in ("eso", "phso", "phdo"):
         r = simulate(
@@ -225,7 +223,7 @@ def _table2_row(ref, true, noise):
 
 
 @pytest.mark.parametrize("sign", [1, -1])
-def test_table2_full_mismatch_phdo_beats_eso(sign):
+def test_table2_full_mismatch_phdo_beats_eso(sign, paper_tuning):
     """The issue's target on the Table 2 sine: lower ME and RMSE than the ESO under mismatch."""
     true = P.replace(
         a1=P.a1 * (1 + 0.02 * sign),
@@ -234,12 +232,12 @@ def test_table2_full_mismatch_phdo_beats_eso(sign):
         beta=P.beta * (1 - 0.1 * sign),
         gamma=P.gamma * (1 + 0.1 * sign),
     )
-    row = _table2_row(REF, true, noise=True)
+    row = _table2_row(paper_tuning, REF, true, noise=True)
     assert row["phdo"][0] < row["eso"][0] and row["phdo"][1] < row["eso"][1]
     assert row["phdo"][0] < row["phso"][0]
 
 
-def test_table2_nominal_phdo_within_2x_of_phso():
-    row = _table2_row(REF, None, noise=False)
+def test_table2_nominal_phdo_within_2x_of_phso(paper_tuning):
+    row = _table2_row(paper_tuning, REF, None, noise=False)
     assert row["phdo"][0] <= 2 * row["phso"][0] and row["phdo"][1] <= 2 * row["phso"][1]
     assert row["phdo"][0] < row["eso"][0]

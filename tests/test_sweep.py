@@ -20,7 +20,6 @@ from bwdesign import (
     TrackingController,
     Triangle,
     UncertaintyBox,
-    digital_tuning,
     hysteresis_increment,
     preset,
     simulate,
@@ -56,9 +55,9 @@ BOX = UncertaintyBox.parse("a1=2%,a2=2%,a3=2%,alpha=10%,beta=10%,gamma=10%")
 EXACT = UncertaintyBox()  # every parameter exact: the scenarios differ in noise only
 
 
-@pytest.fixture(scope="module")
-def tune():
-    return digital_tuning(P, DT)
+@pytest.fixture
+def tune(paper_tuning):
+    return paper_tuning  # digital_tuning(P, DT) (conftest)
 
 
 def _loop(ctl, observer, gains, **kw):
@@ -199,7 +198,8 @@ CHAOS_REF = Sine(amplitude=80, offset=100, frequency=2)
 
 
 @pytest.fixture(scope="module")
-def corner_sweep(tune):
+def corner_sweep(paper_tuning_session):
+    tune = paper_tuning_session  # read only
     ctl = DiscreteTrackingController(
         P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
     )
@@ -356,12 +356,12 @@ def test_the_sweep_box_comes_from_the_stage_or_the_argument():
         sweep_box(bare, undetermined)
 
 
-def test_the_sweep_runs_the_law_its_caller_tuned():
+def test_the_sweep_runs_the_law_its_caller_tuned(paper_tuning):
     """spec_from_config chooses no gains: the law it is given, else the stage's own."""
     config = load_config("configs/paper_experiment.toml")
     box = UncertaintyBox.parse("a1=2%")
     law = stage_tuning(config, "digital")
-    assert law.gains == digital_tuning(config.plant, config.dt).gains
+    assert law.gains == paper_tuning.gains  # digital_tuning(config.plant, config.dt)
     tuned = spec_from_config(config, law=law, uncertainty=box)
     assert tuned.gains == law.gains != tuple(config.gains)
     assert tuned.loop.controller.lambda1 == law.lambda1

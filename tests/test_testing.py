@@ -233,8 +233,8 @@ def test_c_matches_python_for_the_phdo(stage):
     assert checks[0].passed and "PHDO C vs Python" in checks[0].text
 
 
-def test_one_map_from_three_state_gains_to_the_phdo():
-    from bwdesign import digital_tuning, export_c, load_config, preset
+def test_one_map_from_three_state_gains_to_the_phdo(paper_tuning):
+    from bwdesign import export_c, load_config
     from bwdesign.codegen.export import c_sources
     from bwdesign.observers.gains import disturbance_gains_from, gains_for_observer
 
@@ -243,7 +243,7 @@ def test_one_map_from_three_state_gains_to_the_phdo():
     assert gains_for_observer("phso", g) == gains_for_observer("eso", g) == g
     with pytest.raises(ValueError, match="observer must be one of"):
         gains_for_observer("ukf", g)
-    tune = digital_tuning(preset("paper_experiment"), 2e-4)
+    tune = paper_tuning
     assert tune.observer_gains_for("phdo") == gains_for_observer("phdo", tune.gains)
     config = load_config("paper_experiment")
     doc = c_sources(config)[3]
