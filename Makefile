@@ -16,9 +16,11 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# PYTEST_ARGS: extra pytest options (.ci/run passes -m '' and --durations)
+# PYTEST_ARGS: extra pytest options (.ci/run passes -m '' and --durations).
+# -n auto: one pytest-xdist worker per core; --dist loadgroup keeps the tests that read
+# one shared result (tests/conftest.py: once) on one worker, so it is computed once.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -n auto --dist loadgroup $(PYTEST_ARGS)
 
 # the main job: the certified-gains report for the default stage
 report: $(STAMP)
