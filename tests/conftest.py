@@ -83,6 +83,24 @@ REPORT_DATE = "2000-01-01 00:00 UTC"
 
 #: fixtures built by :func:`once`: the tests that use one share an xdist group
 SHARED_FIXTURES = ("paper_report", "saturating_report")
+#: tests of 4 s of CPU or more (measured with one BLAS thread; most are a whole report, a
+#: robust certificate or a CLI run): under xdist they start first, with the shared groups,
+#: so that no worker runs one of them alone at the end while the other waits
+HEAVY = frozenset(
+    (
+        "test_report_includes_the_configs_sweep",
+        "test_not_certified_is_a_well_formed_no",
+        "test_report_allow_unbounded_is_passed_through",
+        "test_two_runs_are_identical",
+        "test_robust_bound_covers_brute_force_vertices_on_a_custom_stage",
+        "test_cli_robust_needs_a_box_and_refuses_a_tier",
+        "test_the_bound_grows_with_input_max_and_none_is_the_old_certificate",
+        "test_cli_tuning_digital_reports_what_it_used",
+        "test_bundled_stages_meet_their_requirements",
+        "test_the_bound_covers_every_corner_after_a_late_move",
+        "test_observer_matches_python",
+    )
+)
 
 
 @pytest.fixture(params=["paper_experiment", "paper_simulation_corrected"])
@@ -119,14 +137,20 @@ def paper_tuning(paper_tuning_session):
 
 
 def pytest_collection_modifyitems(config, items):
-    """Tests that read one shared result run on one xdist worker (``--dist loadgroup``)."""
+    """Under xdist: the tests that read one shared result on one worker (``--dist
+    loadgroup``), and those and the :data:`HEAVY` tests first (longest first balances)."""
     if not config.pluginmanager.hasplugin("xdist"):
         return  # one process: nothing to group (and no xdist_group marker to use)
+    first = set()
     for item in items:
         for name in SHARED_FIXTURES:
             if name in getattr(item, "fixturenames", ()):
                 item.add_marker(pytest.mark.xdist_group(name))
+                first.add(item.nodeid)
                 break
+        if getattr(item, "originalname", item.name) in HEAVY:
+            first.add(item.nodeid)
+    items.sort(key=lambda item: item.nodeid not in first)  # stable: file order otherwise
 
 
 def _shared_root(tmp_path_factory) -> Path:
