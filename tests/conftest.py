@@ -1,12 +1,12 @@
 """Shared fixtures: the canonical stages of the paper, and expensive results computed once.
 
 The tests run OpenBLAS on one thread (:func:`one_blas_thread`): the package's linear
-algebra is on 3x3 to 12x12 matrices, where OpenBLAS's threads only cost (measured on a
+algebra is on small matrices (a loop's few states), where OpenBLAS's threads only cost (on a
 2-core machine: a 6x6 ``solve_triangular`` 0.65 ms with the default threads, 11 us with
 one; the study of configs/paper_experiment.toml 19.9 s of CPU against 11.0 s), and
 pytest-xdist's workers would fight over the cores.
 
-A result many tests read (a written report, a fitted identification) is computed once
+A result many tests read (a written report) is computed once
 per test run by :func:`once`, also when pytest-xdist spreads the tests over several
 worker processes: the first worker that asks builds it under a file lock, the others
 wait and read the files. The tests that read one get the same ``xdist_group`` mark
