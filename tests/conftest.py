@@ -6,13 +6,13 @@ algebra is on small matrices (a loop's few states), where OpenBLAS's threads onl
 one; the study of configs/paper_experiment.toml 19.9 s of CPU against 11.0 s), and
 pytest-xdist's workers would fight over the cores.
 
-A result many tests read (a written report) is computed once
-per test run by :func:`once`, also when pytest-xdist spreads the tests over several
-worker processes: the first worker that asks builds it under a file lock, the others
-wait and read the files. The tests that read one get the same ``xdist_group`` mark
-(:func:`pytest_collection_modifyitems`), so ``--dist loadgroup`` (``make test``) runs
-them on one worker and nobody waits. The files are made read-only and every fixture
-returns fresh objects (parsed text, copies), so no test can change what another reads.
+A result many tests read (a written report) is computed once per test run by
+:func:`once`, also when pytest-xdist spreads the tests over several worker processes:
+the first worker that asks builds it under a file lock, the others wait and read the
+files. The files are made read-only and every fixture returns fresh objects (parsed
+text, copies), so no test can change what another reads. (``--dist loadgroup`` cannot
+keep the readers on one worker: pytest-xdist 3.8 renames the grouped tests through
+``item._nodeid``, which pytest 9 no longer reads, so every test is its own group.)
 """
 
 from __future__ import annotations
@@ -81,25 +81,22 @@ PAPER_CONFIG = ROOT / "configs" / "paper_experiment.toml"
 #: the Date line of the reports the tests write (two runs must compare equal)
 REPORT_DATE = "2000-01-01 00:00 UTC"
 
-#: fixtures built by :func:`once`: the tests that use one share an xdist group
-SHARED_FIXTURES = ("paper_report", "saturating_report")
-#: tests of 4 s of CPU or more (measured with one BLAS thread; most are a whole report, a
-#: robust certificate or a CLI run): under xdist they start first, with the shared groups,
-#: so that no worker runs one of them alone at the end while the other waits
-HEAVY = frozenset(
-    (
-        "test_report_includes_the_configs_sweep",
-        "test_not_certified_is_a_well_formed_no",
-        "test_report_allow_unbounded_is_passed_through",
-        "test_two_runs_are_identical",
-        "test_robust_bound_covers_brute_force_vertices_on_a_custom_stage",
-        "test_cli_robust_needs_a_box_and_refuses_a_tier",
-        "test_the_bound_grows_with_input_max_and_none_is_the_old_certificate",
-        "test_cli_tuning_digital_reports_what_it_used",
-        "test_bundled_stages_meet_their_requirements",
-        "test_the_bound_covers_every_corner_after_a_late_move",
-        "test_observer_matches_python",
-    )
+#: The heaviest test modules, heaviest first, by their measured process CPU with one
+#: BLAS thread (s, rounded); the others follow in file order. Under xdist the modules are
+#: given out in this order (``make test``: one module per worker at a time, ``--dist
+#: loadfile --no-loadscope-reorder``), so no 20-50 s module runs alone at the end.
+#: test_claims_report.py comes after test_report.py has had time to write the shared
+#: paper_experiment report (:func:`paper_report`) that both read.
+HEAVY_MODULES = (
+    "tests/test_report.py",  # 50: the shared report, a second one, the not-certified one
+    "tests/test_sweep.py",  # 40: a report with [sweep] and [uncertainty]
+    "tests/test_codegen.py",  # 24
+    "tests/test_testing.py",  # 20
+    "tests/test_robust_reference.py",  # 19
+    "tests/test_robust.py",  # 18
+    "tests/test_claims_report.py",  # 33: the saturating and the unbounded reports
+    "tests/test_robust_observer.py",  # 11
+    "tests/test_robust_disturbance.py",  # 11
 )
 
 
@@ -137,20 +134,11 @@ def paper_tuning(paper_tuning_session):
 
 
 def pytest_collection_modifyitems(config, items):
-    """Under xdist: the tests that read one shared result on one worker (``--dist
-    loadgroup``), and those and the :data:`HEAVY` tests first (longest first balances)."""
+    """Under xdist, the modules of :data:`HEAVY_MODULES` first (longest first balances)."""
     if not config.pluginmanager.hasplugin("xdist"):
-        return  # one process: nothing to group (and no xdist_group marker to use)
-    first = set()
-    for item in items:
-        for name in SHARED_FIXTURES:
-            if name in getattr(item, "fixturenames", ()):
-                item.add_marker(pytest.mark.xdist_group(name))
-                first.add(item.nodeid)
-                break
-        if getattr(item, "originalname", item.name) in HEAVY:
-            first.add(item.nodeid)
-    items.sort(key=lambda item: item.nodeid not in first)  # stable: file order otherwise
+        return  # one process: the order does not change the time
+    rank = {name: i for i, name in enumerate(HEAVY_MODULES)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))  # stable
 
 
 def _shared_root(tmp_path_factory) -> Path:
