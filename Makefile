@@ -16,9 +16,12 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# PYTEST_ARGS: extra pytest options (.ci/run passes -m '' and --durations)
+# PYTEST_ARGS: extra pytest options (.ci/run passes -m '' and --durations).
+# -n auto: one pytest-xdist worker per core. --dist loadfile runs each test module on
+# one worker, so its module fixtures are computed once; --no-loadscope-reorder gives the
+# modules out in the order tests/conftest.py sets (the heaviest first).
 test: $(STAMP)
-	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -q -n auto --dist loadfile --no-loadscope-reorder $(PYTEST_ARGS)
 
 # the main job: the certified-gains report for the default stage
 report: $(STAMP)

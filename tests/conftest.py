@@ -1,4 +1,30 @@
-"""Shared fixtures: the canonical stages of the paper."""
+"""Shared fixtures: the canonical stages of the paper, and expensive results computed once.
+
+The tests run OpenBLAS on one thread (:func:`one_blas_thread`): the package's linear
+algebra is on small matrices (a loop's few states), where OpenBLAS's threads only cost (on a
+2-core machine: a 6x6 ``solve_triangular`` 0.65 ms with the default threads, 11 us with
+one; the study of configs/paper_experiment.toml 19.9 s of CPU against 11.0 s), and
+pytest-xdist's workers would fight over the cores.
+
+A result many tests read (a written report) is computed once per test run by
+:func:`once`, also when pytest-xdist spreads the tests over several worker processes:
+the first worker that asks builds it under a file lock, the others wait and read the
+files. The files are made read-only and every fixture returns fresh objects (parsed
+text, copies), so no test can change what another reads. (``--dist loadgroup`` cannot
+keep the readers on one worker: pytest-xdist 3.8 renames the grouped tests through
+``item._nodeid``, which pytest 9 no longer reads, so every test is its own group.)
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import shutil
+import stat
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 
 import os
 import shutil
@@ -9,10 +35,73 @@ from hypothesis import settings
 
 from bwdesign import preset
 
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - not POSIX: each worker builds its own copy
+    fcntl = None
+
+
+#: OpenBLAS's thread setters: numpy's and scipy's wheels (ILP64 and LP64), a system build
+SET_THREADS = (
+    "scipy_openblas_set_num_threads64_",
+    "scipy_openblas_set_num_threads",
+    "openblas_set_num_threads",
+)
+
+
+def one_blas_thread() -> None:
+    """OpenBLAS on one thread here and in every process the tests start.
+
+    ``OPENBLAS_NUM_THREADS`` (unless set) reaches the xdist workers and the
+    subprocesses; numpy's and scipy's OpenBLAS are already loaded here (the bwdesign
+    pytest plugin imports numpy before this file), so each is also told directly.
+    """
+    import ctypes
+
+    import scipy.linalg  # noqa: F401  (loads scipy's OpenBLAS, so it is found below)
+
+    threads = int(os.environ.setdefault("OPENBLAS_NUM_THREADS", "1"))
+    try:
+        with open("/proc/self/maps") as maps:
+            libs = {line.split()[-1] for line in maps if "openblas" in line.lower()}
+    except OSError:  # not Linux: the environment variable reaches new processes only
+        return
+    for path in sorted(libs):
+        lib = ctypes.CDLL(path)
+        for name in SET_THREADS:
+            if hasattr(lib, name):
+                getattr(lib, name)(threads)
+
+
+one_blas_thread()
+
 # Property tests draw the same examples on every run (seeded, no flaky CI); the
 # example database is not consulted, so a clean checkout behaves like any other.
 settings.register_profile("bwdesign", derandomize=True, database=None)
 settings.load_profile("bwdesign")
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_CONFIG = ROOT / "configs" / "paper_experiment.toml"
+#: the Date line of the reports the tests write (two runs must compare equal)
+REPORT_DATE = "2000-01-01 00:00 UTC"
+
+#: The heaviest test modules, heaviest first, by their measured process CPU with one
+#: BLAS thread (s, rounded); the others follow in file order. Under xdist the modules are
+#: given out in this order (``make test``: one module per worker at a time, ``--dist
+#: loadfile --no-loadscope-reorder``), so no 20-50 s module runs alone at the end.
+#: test_claims_report.py comes after test_report.py has had time to write the shared
+#: paper_experiment report (:func:`paper_report`) that both read.
+HEAVY_MODULES = (
+    "tests/test_report.py",  # 50: the shared report, a second one, the not-certified one
+    "tests/test_sweep.py",  # 40: a report with [sweep] and [uncertainty]
+    "tests/test_codegen.py",  # 24
+    "tests/test_testing.py",  # 20
+    "tests/test_robust_reference.py",  # 19
+    "tests/test_robust.py",  # 18
+    "tests/test_claims_report.py",  # 33: the saturating and the unbounded reports
+    "tests/test_robust_observer.py",  # 11
+    "tests/test_robust_disturbance.py",  # 11
+)
 
 
 _SESSION: dict[str, str | None] = {}
@@ -56,3 +145,101 @@ def experiment():
 @pytest.fixture
 def simulation():
     return preset("paper_simulation_corrected")
+
+
+@pytest.fixture(scope="session")
+def paper_tuning_session():
+    """``digital_tuning(preset("paper_experiment"), 2e-4)``, computed once per process
+    (1.3 s); for module fixtures that only read it (tests take :func:`paper_tuning`)."""
+    from bwdesign import digital_tuning
+
+    return digital_tuning(preset("paper_experiment"), 2e-4)
+
+
+@pytest.fixture
+def paper_tuning(paper_tuning_session):
+    """The paper stage's digital tuning at 0.2 ms (:func:`paper_tuning_session`), a copy
+    for each test. For tests that use the tuning; the tests of digital_tuning itself
+    (tests/test_loop.py) call it."""
+    return copy.deepcopy(paper_tuning_session)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under xdist, the modules of :data:`HEAVY_MODULES` first (longest first balances)."""
+    if not config.pluginmanager.hasplugin("xdist"):
+        return  # one process: the order does not change the time
+    rank = {name: i for i, name in enumerate(HEAVY_MODULES)}
+    items.sort(key=lambda item: rank.get(item.nodeid.split("::")[0], len(rank)))  # stable
+
+
+def _shared_root(tmp_path_factory) -> Path:
+    """The run's temporary root: the same directory for every xdist worker of one run."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+def once(tmp_path_factory, name: str, build: Callable[[Path], None]) -> Path:
+    """The directory ``build(path)`` fills, built once per test run, then read-only.
+
+    ``build`` writes into a new directory; a build that raises leaves nothing behind
+    (the next caller builds again and sees the same error).
+    """
+    root = _shared_root(tmp_path_factory)
+    target = root / f"shared-{name}"
+    with open(root / f"shared-{name}.lock", "w") as lock:
+        if fcntl is not None:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not (target / ".built").exists():
+            shutil.rmtree(target, ignore_errors=True)
+            build(target)
+            for p in target.rglob("*"):
+                if p.is_file():
+                    p.chmod(stat.S_IRUSR | stat.S_IRGRP | stat.S_IROTH)
+            (target / ".built").touch()
+    return target
+
+
+@dataclass(frozen=True)
+class WrittenReport:
+    """A report ``bwdesign report`` wrote: its folder and what it returned.
+
+    ``md`` and ``cert`` read the files on every access (a fresh dict each time).
+    """
+
+    out_dir: Path
+    certified: bool
+
+    @property
+    def md(self) -> str:
+        return (self.out_dir / "report.md").read_text()
+
+    @property
+    def cert(self) -> dict:
+        return json.loads((self.out_dir / "certificate.json").read_text())
+
+
+def write_report_once(tmp_path_factory, name: str, config_path: Path) -> WrittenReport:
+    """``write_report`` of ``config_path`` (quiet, dated :data:`REPORT_DATE`), once per run."""
+    from bwdesign.model.config import load_config
+    from bwdesign.report.certified import write_report
+
+    def build(path: Path) -> None:
+        path.mkdir(parents=True)
+        outcome = write_report(
+            load_config(config_path), path / "report", quiet=True, date=REPORT_DATE
+        )
+        (path / "certified.json").write_text(json.dumps(outcome.certified))
+
+    path = once(tmp_path_factory, name, build)
+    certified = json.loads((path / "certified.json").read_text())
+    return WrittenReport(out_dir=path / "report", certified=certified)
+
+
+@pytest.fixture(scope="session")
+def paper_report(tmp_path_factory) -> WrittenReport:
+    """The certified-gains report of ``configs/paper_experiment.toml``, written once per run.
+
+    Read by the report's content tests (tests/test_report.py) and the report's claims
+    (tests/test_claims_report.py); every one of them only reads it.
+    """
+    return write_report_once(tmp_path_factory, "paper_report", PAPER_CONFIG)

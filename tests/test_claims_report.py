@@ -8,18 +8,17 @@ import re
 from pathlib import Path
 
 import pytest
+from conftest import once
 
 from bwdesign.cli.main import main
 from bwdesign.design.tuning import digital_tuning
 from bwdesign.errors import UnboundedModelError
 from bwdesign.model.config import load_config
-from bwdesign.report.certified import build_report
 from bwdesign.study import CERTIFICATE_PARTS, study
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "paper_experiment.toml"
 TEXT = CONFIG.read_text()
-DATE = "2000-01-01 00:00 UTC"
 
 
 def _config(tmp_path, name, text):
@@ -63,17 +62,20 @@ def test_report_allow_unbounded_is_passed_through(tmp_path, capsys):
 
 
 @pytest.fixture(scope="module")
-def paper_report(tmp_path_factory):
-    out = tmp_path_factory.mktemp("paper")
+def report_runs(paper_tuning_session):
+    """The report's tracking runs, computed again here (the report's own are files)."""
     config = load_config(CONFIG)
-    doc, s = build_report(config, out, quiet=True, date=DATE)
-    cert = s.to_dict()
-    runs = tracking_runs(config, gains=config.gains, tuning=digital_tuning(config.plant, config.dt))
-    return doc.to_markdown(), cert, runs
+    return tracking_runs(config, gains=config.gains, tuning=paper_tuning_session)
 
 
-def test_report_states_the_initial_state(paper_report):
-    md, _, runs = paper_report
+@pytest.fixture
+def paper(paper_report, report_runs):
+    """The paper_experiment report (conftest: written once per run) and its runs."""
+    return paper_report.md, paper_report.cert, report_runs
+
+
+def test_report_states_the_initial_state(paper):
+    md, _, runs = paper
     assert "from rest" not in md
     s = runs[0].result.settings
     assert s["x0"] == s["xhat0"] == [100.0, pytest.approx(502.6548245743669, rel=1e-15), 0.0]
@@ -81,8 +83,8 @@ def test_report_states_the_initial_state(paper_report):
     assert f"feedforward input {s['u_prev']:.6g} V held before t = 0" in md
 
 
-def test_report_commands_reproduce_its_runs(paper_report, capsys):
-    md, _, runs = paper_report
+def test_report_commands_reproduce_its_runs(paper, capsys):
+    md, _, runs = paper
     assert len(runs) == 6
     for run in runs:
         assert run.command_text in md, run.label
@@ -99,13 +101,12 @@ def test_report_commands_reproduce_its_runs(paper_report, capsys):
         assert got["estimation_rmse"]["x3"] == pytest.approx(r.estimation_rmse[2], abs=1e-9)
 
 
-def test_report_runs_the_phdo_with_gains_from_the_one_helper(paper_report):
+def test_report_runs_the_phdo_with_gains_from_the_one_helper(paper, paper_tuning):
     """{eq. 12, digital tuning} x {PHSO, ESO, PHDO}; the PHDO's gains are (l1, l2, 0, l3)."""
     from bwdesign.observers.gains import disturbance_gains_from
 
-    md, _, runs = paper_report
-    config = load_config(CONFIG)
-    tuning = digital_tuning(config.plant, config.dt)
+    md, _, runs = paper
+    tuning = paper_tuning  # digital_tuning(config.plant, config.dt)
     labels = [run.label for run in runs]
     assert labels == [
         f"{o} ({law})" for law in ("eq. 12", "digital tuning") for o in ("PHSO", "ESO", "PHDO")
@@ -151,13 +152,18 @@ SATURATING = MILLIVOLT.replace("lambda2 = 2.0", "lambda2 = 2.0\nu_min = 0.0\nu_m
 
 @pytest.fixture(scope="module")
 def saturating_report(tmp_path_factory):
-    base = tmp_path_factory.mktemp("sat")
-    cfg = _config(base, "sat.toml", SATURATING)
-    out = base / "out"
-    code = main(["report", "--config", str(cfg), "--out", str(out), "--quiet"])
-    md = (out / "report.md").read_text()
-    cert = json.loads((out / "certificate.json").read_text())
-    return cfg, code, md, cert
+    """``bwdesign report`` of the saturating mV stage, run once per test run (conftest)."""
+
+    def build(base):
+        base.mkdir(parents=True)
+        cfg = _config(base, "sat.toml", SATURATING)
+        code = main(["report", "--config", str(cfg), "--out", str(base / "out"), "--quiet"])
+        (base / "code").write_text(str(code))
+
+    base = once(tmp_path_factory, "saturating_report", build)
+    md = (base / "out" / "report.md").read_text()
+    cert = json.loads((base / "out" / "certificate.json").read_text())
+    return base / "sat.toml", int((base / "code").read_text()), md, cert
 
 
 def test_saturation_qualifies_the_verdict_and_exit_code(saturating_report):
@@ -223,8 +229,8 @@ def test_plots_label_the_input_unit():
 # -- item 7: the certificate table and stderr --------------------------------------
 
 
-def test_certificate_table_labels_both_decays(paper_report):
-    md, cert, _ = paper_report
+def test_certificate_table_labels_both_decays(paper):
+    md, cert, _ = paper
     c, s = cert["configured"]["decay"], cert["synthesized"]["decay"]
     assert c != s  # the two sets are certified at different required decays ...
     header = next(line for line in md.splitlines() if line.startswith("| tier |"))

@@ -62,8 +62,13 @@ def _build(out: Path, *extra: str) -> Path:
     return exe
 
 
-def _run(exe: Path, mode: str, rows: np.ndarray) -> np.ndarray:
-    text = "\n".join(",".join(repr(float(v)) for v in r) for r in rows) + "\n"
+def _text(rows: np.ndarray) -> str:
+    """The harness's input: one line per step, each value as repr (exact)."""
+    return "\n".join(",".join(map(repr, r)) for r in np.asarray(rows, float).tolist()) + "\n"
+
+
+def _run(exe: Path, mode: str, rows: np.ndarray | str) -> np.ndarray:
+    text = rows if isinstance(rows, str) else _text(rows)
     res = subprocess.run([str(exe), mode], input=text, capture_output=True, text=True, check=True)
     return np.loadtxt(res.stdout.splitlines(), delimiter=",", ndmin=2)
 
@@ -87,6 +92,55 @@ def config():
     return load_config(CONFIG)
 
 
+def _frozen(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@pytest.fixture(scope="module")
+def records(config):
+    """Per input of _inputs: (u, z, the harness input), simulated once for every observer test.
+
+    z is the exact-model output with 10 nm sensor noise, drawn from the same seeded
+    generator after the inputs, input by input (read-only arrays).
+    """
+    p, dt = config.plant, config.dt
+    rng = np.random.default_rng(7)
+    out = {}
+    for name, u in _inputs(dt, rng).items():
+        X = simulate_zoh(p, u, dt, x0=np.zeros(3))
+        z = X[1:, 0] + rng.normal(0, 0.01, N)  # 10 nm sensor noise
+        out[name] = (_frozen(u), _frozen(z), _text(np.column_stack([u, z])))
+    return out
+
+
+@pytest.fixture(scope="module")
+def python_estimates(config, records):
+    """``python_estimates(mode)``: the Python observer's batch_filter of every record.
+
+    Computed once per observer (phso, eso, phdo) for both precisions (read-only arrays).
+    """
+    p, dt = config.plant, config.dt
+    observers = {
+        "phso": (HysteresisObserver, config.gains),
+        "eso": (ExtendedStateObserver, config.gains),
+        "phdo": (DisturbanceHysteresisObserver, disturbance_gains_from(config.gains)),
+    }
+    cache: dict[str, dict[str, np.ndarray]] = {}
+
+    def estimates(mode: str) -> dict[str, np.ndarray]:
+        if mode not in cache:
+            cls, gains = observers[mode]
+            cache[mode] = {
+                name: _frozen(cls(p, gains, dt).batch_filter(z, u))
+                for name, (u, z, _) in records.items()
+            }
+        return cache[mode]
+
+    return estimates
+
+
 @pytest.fixture(scope="module")
 def builds(tmp_path_factory, config):
     if CC is None:
@@ -102,15 +156,11 @@ def builds(tmp_path_factory, config):
 @needs_cc
 @pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
 @pytest.mark.parametrize("cls", [HysteresisObserver, ExtendedStateObserver], ids=["phso", "eso"])
-def test_observer_matches_python(builds, config, precision, tol, cls):
-    p, dt = config.plant, config.dt
-    rng = np.random.default_rng(7)
+def test_observer_matches_python(builds, records, python_estimates, precision, tol, cls):
     mode = "phso" if cls is HysteresisObserver else "eso"
-    for name, u in _inputs(dt, rng).items():
-        X = simulate_zoh(p, u, dt, x0=np.zeros(3))
-        z = X[1:, 0] + rng.normal(0, 0.01, N)  # 10 nm sensor noise
-        ref = cls(p, config.gains, dt).batch_filter(z, u)
-        got = _run(builds[precision], mode, np.column_stack([u, z]))
+    for name, (_, _, rows) in records.items():
+        ref = python_estimates(mode)[name]
+        got = _run(builds[precision], mode, rows)
         scale = np.ptp(ref, axis=0)
         err = np.max(np.abs(got - ref), axis=0) / scale
         assert got.shape == ref.shape
@@ -119,7 +169,7 @@ def test_observer_matches_python(builds, config, precision, tol, cls):
 
 @needs_cc
 @pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
-def test_phdo_matches_python(builds, config, precision, tol):
+def test_phdo_matches_python(builds, records, python_estimates, precision, tol):
     """The PHDO's four states against DisturbanceHysteresisObserver.batch_filter.
 
     float64: each state within tol of its range (in fact 0.0, bit-identical). float32:
@@ -129,14 +179,9 @@ def test_phdo_matches_python(builds, config, precision, tol):
     rounding of the model constants (a static-gain error of ~1e-7, i.e. ~1 ulp of x1):
     its error is ~2e-5 um, 3e-4 to 5e-4 of its own range (the bench prints it).
     """
-    p, dt = config.plant, config.dt
-    rng = np.random.default_rng(7)
-    gains = disturbance_gains_from(config.gains)
-    for name, u in _inputs(dt, rng).items():
-        X = simulate_zoh(p, u, dt, x0=np.zeros(3))
-        z = X[1:, 0] + rng.normal(0, 0.01, N)
-        ref = DisturbanceHysteresisObserver(p, gains, dt).batch_filter(z, u)
-        got = _run(builds[precision], "phdo", np.column_stack([u, z]))
+    for name, (_, _, rows) in records.items():
+        ref = python_estimates("phdo")[name]
+        got = _run(builds[precision], "phdo", rows)
         assert got.shape == ref.shape == (N, 4)
         err = np.max(np.abs(got - ref), axis=0)
         lumped_ref, lumped = ref[:, 2] + ref[:, 3], got[:, 2] + got[:, 3]
@@ -149,20 +194,12 @@ def test_phdo_matches_python(builds, config, precision, tol):
             assert err[3] <= tol * np.ptp(ref[:, 3]), f"{name}: d error {err[3]:.3g} um"
 
 
-@needs_cc
-@pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
-def test_closed_loop_with_phdo_matches_python(builds, config, precision, tol):
-    """The controller fed by the PHDO's lumped estimate, as bwdesign.simulate runs the loop.
+@pytest.fixture(scope="module")
+def phdo_loop_run(config):
+    """The Python PHDO loop of test_closed_loop_with_phdo_matches_python, run once.
 
-    The Python loop (generic path: the objects themselves) runs a plant with a1 +2 % and
-    a3 -2 % (the PHDO's case: d has work to do) and 10 nm noise; the harness replays its
-    measurements z_k (phdo-loop) and must give the same inputs u_k and estimates. float64
-    closes the loop on its own u_k (bit-identical, so the replay is the loop). float32
-    predicts with the applied u_k as logged (the fifth column): a replay without the plant
-    has a neutral direction (a shift dw of the lumped estimate moves u by (a1/a3) dw through
-    the law, and that u makes the observer's model agree with the frozen z again), so on its
-    own u_k float32 rounding walks along it (measured: 0.19 of u's range over 1e5 steps); in
-    the real loop the plant answers u and pins it.
+    Both precisions replay the same run: t, z, x_d and its derivatives, u and xhat
+    (read-only arrays).
     """
     p, dt, c = config.plant, config.dt, config.controller
     ref_traj = Triangle(amplitude=60.0, offset=100.0, frequency=2.0)
@@ -181,18 +218,44 @@ def test_closed_loop_with_phdo_matches_python(builds, config, precision, tol):
         seed=5,
         fast=False,
     )
-    assert res.stable and res.u.shape == (N,)
     xd, vd, ad = (np.asarray(a) for a in ref_traj.evaluate(res.t))
-    cols = [res.z, xd, vd, ad] + ([res.u] if precision == "float32" else [])
-    got = _run(builds[precision], "phdo-loop", np.column_stack(cols))
-    want = np.column_stack([res.u, res.xhat])
-    err = np.max(np.abs(got - want), axis=0) / np.ptp(want, axis=0)
-    assert np.all(err <= tol), f"u, x1, x2, x3 + d: relative error {err} > {tol}"
+    arrays = {"z": res.z, "xd": xd, "vd": vd, "ad": ad, "u": res.u, "xhat": res.xhat}
+    return res.stable, {k: _frozen(v) for k, v in arrays.items()}
 
 
 @needs_cc
 @pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
-def test_controllers_match_python(builds, config, precision, tol):
+def test_closed_loop_with_phdo_matches_python(builds, phdo_loop_run, precision, tol):
+    """The controller fed by the PHDO's lumped estimate, as bwdesign.simulate runs the loop.
+
+    The Python loop (generic path: the objects themselves) runs a plant with a1 +2 % and
+    a3 -2 % (the PHDO's case: d has work to do) and 10 nm noise; the harness replays its
+    measurements z_k (phdo-loop) and must give the same inputs u_k and estimates. float64
+    closes the loop on its own u_k (bit-identical, so the replay is the loop). float32
+    predicts with the applied u_k as logged (the fifth column): a replay without the plant
+    has a neutral direction (a shift dw of the lumped estimate moves u by (a1/a3) dw through
+    the law, and that u makes the observer's model agree with the frozen z again), so on its
+    own u_k float32 rounding walks along it (measured: 0.19 of u's range over 1e5 steps); in
+    the real loop the plant answers u and pins it.
+    """
+    stable, res = phdo_loop_run
+    assert stable and res["u"].shape == (N,)
+    cols = [res["z"], res["xd"], res["vd"], res["ad"]] + (
+        [res["u"]] if precision == "float32" else []
+    )
+    got = _run(builds[precision], "phdo-loop", np.column_stack(cols))
+    want = np.column_stack([res["u"], res["xhat"]])
+    err = np.max(np.abs(got - want), axis=0) / np.ptp(want, axis=0)
+    assert np.all(err <= tol), f"u, x1, x2, x3 + d: relative error {err} > {tol}"
+
+
+@pytest.fixture(scope="module")
+def controller_inputs(config):
+    """The controllers' inputs (noisy estimates, a 1 Hz sine) as the harness reads them,
+    and each law's Python output.
+
+    Computed once for both precisions (read-only arrays).
+    """
     p, dt, c = config.plant, config.dt, config.controller
     rng = np.random.default_rng(3)
     t = np.arange(N) * dt
@@ -201,20 +264,28 @@ def test_controllers_match_python(builds, config, precision, tol):
     ad = -80 * (2 * np.pi) ** 2 * np.sin(2 * np.pi * t)
     xhat = np.column_stack([xd, vd, np.zeros(N)]) + rng.normal(0, [0.5, 50.0, 0.1], (N, 3))
     rows = np.column_stack([xhat, xd, vd, ad])
+    refs = {}
     for mode, ctl in (
         ("controller", DiscreteTrackingController(p, c.lambda1, c.lambda2, dt=dt)),
         ("eq12", TrackingController(p, c.lambda1, c.lambda2)),
     ):
-        ref = np.array([ctl(r[:3], tuple(r[3:])) for r in rows])
+        refs[mode] = _frozen([ctl(r[:3], tuple(r[3:])) for r in rows])
+    return _text(rows), refs
+
+
+@needs_cc
+@pytest.mark.parametrize("precision, tol", [("float64", 1e-12), ("float32", 1e-4)])
+def test_controllers_match_python(builds, controller_inputs, precision, tol):
+    rows, refs = controller_inputs
+    for mode, ref in refs.items():
         got = _run(builds[precision], mode, rows)[:, 0]
         err = np.max(np.abs(got - ref)) / np.ptp(ref)
         assert err <= tol, f"{mode}: relative error {err:.3g} > {tol}"
 
 
 @needs_cc
-def test_digital_tuning_with_integral_and_saturation(tmp_path, config):
+def test_digital_tuning_with_integral_and_saturation(tmp_path, config, paper_tuning):
     """The digital-tuning form (integral action) and amplifier limits, against Python."""
-    from bwdesign import digital_tuning
     from bwdesign.model.config import ControllerSettings
 
     cfg = replace(
@@ -222,7 +293,7 @@ def test_digital_tuning_with_integral_and_saturation(tmp_path, config):
     )
     res = export_c(cfg, tmp_path, gains_from="digital")
     exe = _build(tmp_path)
-    tune = digital_tuning(cfg.plant, cfg.dt)
+    tune = paper_tuning  # digital_tuning(cfg.plant, cfg.dt)
     ctl = DiscreteTrackingController(
         cfg.plant,
         tune.lambda1,
@@ -502,12 +573,10 @@ def test_harness_default_observer_phdo(tmp_path, capsys, config):
     assert doc["certificate"]["phdo"]["certified"] and doc["certificate"]["certified"]
 
 
-def test_phdo_gains_per_source(tmp_path, config):
+def test_phdo_gains_per_source(tmp_path, config, paper_tuning):
     """--tuning digital: observer_gains_for("phdo"); --synthesize: the synthesised K lumped."""
-    from bwdesign import digital_tuning
-
     res = export_c(config, tmp_path / "digital", gains_from="digital")
-    g = digital_tuning(config.plant, config.dt).observer_gains_for("phdo")
+    g = paper_tuning.observer_gains_for("phdo")  # digital_tuning(config.plant, config.dt)
     phdo = res.document["observers"]["phdo"]
     assert phdo["gains"] == list(g) and "observer_gains_for('phdo')" in phdo["gains_from"]
     assert phdo["K"] == DisturbanceHysteresisObserver(config.plant, g, config.dt).K.tolist()

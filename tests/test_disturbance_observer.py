@@ -6,6 +6,7 @@ import json
 import math
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -22,7 +23,7 @@ from bwdesign import (
     simulate,
     simulate_zoh,
 )
-from bwdesign.design import digital_tuning
+from bwdesign.cli.main import main
 from bwdesign.errors import GainError, InputError
 from bwdesign.observers.gains import discrete_gains
 
@@ -148,8 +149,8 @@ def tuned_loop(tu, observer, **kw):
 
 
 @pytest.mark.parametrize("mismatch", [False, True])
-def test_fast_and_generic_paths_agree(mismatch):
-    tu = digital_tuning(P, DT)
+def test_fast_and_generic_paths_agree(mismatch, paper_tuning):
+    tu = paper_tuning
     tp = P.replace(a1=P.a1 * 1.02, a3=P.a3 * 0.98, gamma=P.gamma * 1.1) if mismatch else None
     lp = tuned_loop(tu, "phdo", delay=True)
     assert lp.observer.gains == tu.observer_gains_for("phdo")
@@ -162,8 +163,8 @@ def test_fast_and_generic_paths_agree(mismatch):
     np.testing.assert_allclose(runs[0].u, runs[1].u, rtol=0, atol=1e-9)
 
 
-def test_tuning_gains_for_phdo():
-    tu = digital_tuning(P, DT)
+def test_tuning_gains_for_phdo(paper_tuning):
+    tu = paper_tuning
     l1, l2, l3 = tu.gains
     assert tu.observer_gains_for("phdo") == (l1, l2, 0.0, l3)
     with pytest.raises(InputError):
@@ -191,24 +192,33 @@ def _cli(*args):
     )
 
 
-def test_cli_tuning_digital_reports_what_it_used():
+def _simulate(capsys, *args):
+    """``bwdesign simulate *args`` in this process (no 1.4 s of imports): code and output."""
+    capsys.readouterr()
+    code = main(["simulate", *args])
+    out, err = capsys.readouterr()
+    return SimpleNamespace(returncode=code, stdout=out, stderr=err)
+
+
+def test_cli_tuning_digital_reports_what_it_used(paper_tuning, capsys):
+    """The run in a new process (python -m bwdesign); the two refusals in this one."""
     base = ["--plant", "paper_experiment", "--amplitude", "80", "--offset", "100"]
     base += ["--frequency", "1", "--dt", "2e-4", "--duration", "0.6", "--delay", "--json"]
     res = _cli(*base, "--observer", "phdo", "--tuning", "digital")
     assert res.returncode == 0, res.stderr
     doc = json.loads(res.stdout)
-    tu = digital_tuning(P, DT)
+    tu = paper_tuning
     assert doc["tuning"]["gains"] == list(tu.observer_gains_for("phdo"))
     assert doc["tuning"]["lambda1"] == tu.lambda1 and doc["tuning"]["form"] == "discrete"
     assert doc["observer"] == "phdo"
-    bad = _cli(*base, "--observer", "phdo", "--tuning", "digital", "--lambda1", "5")
+    bad = _simulate(capsys, *base, "--observer", "phdo", "--tuning", "digital", "--lambda1", "5")
     assert bad.returncode == 2 and bad.stderr.startswith("error:") and "--lambda1" in bad.stderr
-    bad = _cli(*base, "--observer", "phdo", "--gains", "1,2,3", "--lambda1", "1", "--lambda2", "2")
+    gains = ["--gains", "1,2,3", "--lambda1", "1", "--lambda2", "2"]
+    bad = _simulate(capsys, *base, "--observer", "phdo", *gains)
     assert bad.returncode == 2 and "takes 4 gains" in bad.stderr
 
 
-def _table2_row(ref, true, noise):
-    tu = digital_tuning(P, DT)
+def _table2_row(tu, ref, true, noise):
     out = {}
     for o in ("eso", "phso", "phdo"):
         r = simulate(
@@ -225,7 +235,7 @@ def _table2_row(ref, true, noise):
 
 
 @pytest.mark.parametrize("sign", [1, -1])
-def test_table2_full_mismatch_phdo_beats_eso(sign):
+def test_table2_full_mismatch_phdo_beats_eso(sign, paper_tuning):
     """The issue's target on the Table 2 sine: lower ME and RMSE than the ESO under mismatch."""
     true = P.replace(
         a1=P.a1 * (1 + 0.02 * sign),
@@ -234,12 +244,12 @@ def test_table2_full_mismatch_phdo_beats_eso(sign):
         beta=P.beta * (1 - 0.1 * sign),
         gamma=P.gamma * (1 + 0.1 * sign),
     )
-    row = _table2_row(REF, true, noise=True)
+    row = _table2_row(paper_tuning, REF, true, noise=True)
     assert row["phdo"][0] < row["eso"][0] and row["phdo"][1] < row["eso"][1]
     assert row["phdo"][0] < row["phso"][0]
 
 
-def test_table2_nominal_phdo_within_2x_of_phso():
-    row = _table2_row(REF, None, noise=False)
+def test_table2_nominal_phdo_within_2x_of_phso(paper_tuning):
+    row = _table2_row(paper_tuning, REF, None, noise=False)
     assert row["phdo"][0] <= 2 * row["phso"][0] and row["phdo"][1] <= 2 * row["phso"][1]
     assert row["phdo"][0] < row["eso"][0]

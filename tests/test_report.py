@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import pytest
+from conftest import REPORT_DATE
 
 from bwdesign.cli.main import main
 from bwdesign.model.config import load_config
@@ -16,7 +17,7 @@ from bwdesign.study import CERTIFICATE_PARTS, REPORT_SECTIONS, study
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "configs" / "paper_experiment.toml"
 COMMITTED = ROOT / "reports" / "paper_experiment"
-DATE = "2000-01-01 00:00 UTC"
+DATE = REPORT_DATE
 
 #: Tolerance of the committed-JSON comparison. Gains, discrete gains and
 #: decay rates come from deterministic solvers and closed forms and must agree
@@ -26,17 +27,14 @@ RTOL_VALUES = 1e-6
 RTOL_ENVELOPE = 0.02
 
 
-@pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    base = tmp_path_factory.mktemp("reports")
-    config = load_config(CONFIG)
-    first = write_report(config, base / "a", quiet=True, date=DATE)
-    second = write_report(config, base / "b", quiet=True, date=DATE)
-    return first, second
+@pytest.fixture
+def built(paper_report):
+    """The paper_experiment report (conftest: written once per run, read-only)."""
+    return paper_report
 
 
 def test_report_files_and_verdict(built):
-    first, _ = built
+    first = built
     out = first.out_dir
     for name in ("report.md", "report.html", "certificate.json"):
         assert (out / name).is_file()
@@ -61,8 +59,7 @@ def _md_row(md: str, first_cell: str) -> list[str]:
 
 def test_summary_block_quotes_the_report_numbers(built):
     """The summary at the top: verdict, envelope, loop error, export; the report's own numbers."""
-    md = (built[0].out_dir / "report.md").read_text()
-    cert = json.loads((built[0].out_dir / "certificate.json").read_text())
+    md, cert = built.md, built.cert
     lines = md.splitlines()
     top = lines.index("## Summary")
     assert top < lines.index("## Plant")
@@ -87,8 +84,10 @@ def test_summary_block_quotes_the_report_numbers(built):
     assert cmd in rows["export"]
 
 
-def test_two_runs_are_identical(built):
-    a, b = built
+def test_two_runs_are_identical(built, tmp_path):
+    """A second report in this process is the first byte for byte (no state carried over)."""
+    a = built
+    b = write_report(load_config(CONFIG), tmp_path / "b", quiet=True, date=DATE)
     for name in ("report.md", "certificate.json"):
         # the reproducibility command names each run's own --out
         one = (a.out_dir / name).read_text().replace(str(a.out_dir), "OUT")
@@ -98,8 +97,8 @@ def test_two_runs_are_identical(built):
 
 def test_the_reproducibility_command_writes_the_same_report(built):
     """It names the config and --out as given (issue 24: --out was missing)."""
-    first, _ = built
-    md = (first.out_dir / "report.md").read_text()
+    first = built
+    md = first.md
     line = next(ln for ln in md.splitlines() if ln.startswith("| command |"))
     assert line == f"| command | bwdesign report --config {CONFIG} --out {first.out_dir} |"
 
@@ -124,12 +123,17 @@ def _compare(new, old, path=""):
         assert new == old, path
 
 
-def test_committed_certificate_json_is_current():
-    """Regenerate certificate.json and compare with the committed one (tolerances above)."""
+def test_committed_certificate_json_is_current(built):
+    """Regenerate certificate.json and compare with the committed one (tolerances above).
+
+    The study of the certificate's parts alone also gives exactly the report's entries.
+    """
     committed = json.loads((COMMITTED / "certificate.json").read_text())
     doc = study(load_config(CONFIG), parts=CERTIFICATE_PARTS).to_dict()
     fresh = json.loads(dump_json(doc))
     _compare(fresh, committed)
+    report = {k: v for k, v in built.cert.items() if k not in REPORT_SECTIONS}
+    assert fresh == report
 
 
 def test_not_certified_is_a_well_formed_no(tmp_path, capsys):
@@ -238,9 +242,8 @@ def test_tier_synthesis_rows_hold_when_recomputed(built):
     from bwdesign.certify.tiers import certify
     from bwdesign.design.gains import synthesize
 
-    first, _ = built
-    cert = json.loads((first.out_dir / "certificate.json").read_text())
-    md = (first.out_dir / "report.md").read_text()
+    first = built
+    cert, md = first.cert, first.md
     config = load_config(CONFIG)
     p, dt = config.plant, config.dt
     ts = cert["tier_synthesis"]

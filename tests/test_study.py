@@ -104,6 +104,15 @@ def test_check_requirements_reads_one_study(monkeypatch):
     out = checks.check_requirements(STAGE)
     assert len(out) == 6 and all(c.passed for c in out)
     assert calls == [{"configured", "corner_tracking", "loop"}]
+    # the checks in the [requirements] schema's order
+    assert [c.name for c in out] == [
+        "certified",
+        "min_decay",
+        "max_me_um",
+        "max_maxe_um",
+        "min_gain_margin_db",
+        "min_phase_margin_deg",
+    ]
 
 
 def test_render_needs_every_part_the_report_shows(tmp_path):

@@ -17,7 +17,6 @@ from bwdesign.testing import (
     assert_certified,
     assert_synthesis_feasible,
     assert_tracks,
-    check_requirements,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,10 +62,20 @@ def test_certified_over_an_uncertainty_box():
 
 
 def test_check_passes_on_the_example_and_writes_junit(tmp_path, capsys):
+    """Every requirement passes, one line each, in the [requirements] schema's order."""
     xml = tmp_path / "r.xml"
     assert main(["check", str(STAGE), "--junit-xml", str(xml)]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == 6 and all(line.startswith("PASS  stage.toml  ") for line in lines)
+    # check prints check_requirements' checks as they come: their names, in order
+    assert [line.split("  ")[2].split(":")[0] for line in lines] == [
+        "certified",
+        "min_decay",
+        "max_me_um",
+        "max_maxe_um",
+        "min_gain_margin_db",
+        "min_phase_margin_deg",
+    ]
     suite = ET.parse(xml).getroot().find("testsuite")
     assert suite.get("tests") == "6" and suite.get("failures") == "0"
 
@@ -118,18 +127,6 @@ def test_check_without_requirements_is_bad_input(tmp_path, capsys):
     bare.write_text(text[: text.index("[requirements]")])
     assert main(["check", str(bare)]) == 2
     assert "no [requirements] section" in capsys.readouterr().err
-
-
-def test_requirements_keep_the_schema_order():
-    names = [c.name for c in check_requirements(STAGE)]
-    assert names == [
-        "certified",
-        "min_decay",
-        "max_me_um",
-        "max_maxe_um",
-        "min_gain_margin_db",
-        "min_phase_margin_deg",
-    ]
 
 
 def _pytest(folder: Path) -> subprocess.CompletedProcess:
@@ -236,8 +233,8 @@ def test_c_matches_python_for_the_phdo(stage):
     assert checks[0].passed and "PHDO C vs Python" in checks[0].text
 
 
-def test_one_map_from_three_state_gains_to_the_phdo():
-    from bwdesign import digital_tuning, export_c, load_config, preset
+def test_one_map_from_three_state_gains_to_the_phdo(paper_tuning):
+    from bwdesign import export_c, load_config
     from bwdesign.codegen.export import c_sources
     from bwdesign.observers.gains import disturbance_gains_from, gains_for_observer
 
@@ -246,7 +243,7 @@ def test_one_map_from_three_state_gains_to_the_phdo():
     assert gains_for_observer("phso", g) == gains_for_observer("eso", g) == g
     with pytest.raises(ValueError, match="observer must be one of"):
         gains_for_observer("ukf", g)
-    tune = digital_tuning(preset("paper_experiment"), 2e-4)
+    tune = paper_tuning
     assert tune.observer_gains_for("phdo") == gains_for_observer("phdo", tune.gains)
     config = load_config("paper_experiment")
     doc = c_sources(config)[3]
