@@ -22,13 +22,10 @@ import json
 import os
 import shutil
 import stat
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-
-import os
-import shutil
-import tempfile
 
 import pytest
 from hypothesis import settings
