@@ -253,36 +253,28 @@ def recertify_sampled(res: SynthesisResult, dt: float, allow_unbounded: bool) ->
         return replace(res, dt=dt)
     kept = res.report
     continuous = TIERS[:3]
-    if (
+    # the continuous tiers do not depend on dt: when they are at hand only the sampled
+    # one is new (the report is the one certify(..., dt=dt) returns, computed once)
+    reuse = (
         kept is not None
         and kept.dt is None
         and tuple(c.name for c in kept.certificates) == continuous
-    ):
-        # the continuous tiers do not depend on dt: only the sampled one is new (the
-        # report is the one certify(..., dt=dt) returns, without computing them twice)
-        smp_only = certify(
-            res.params,
-            res.gains,
-            udot_max=res.udot_max,
-            decay=res.decay,
-            dt=dt,
-            tiers=("sampled",),
-            allow_unbounded=allow_unbounded,
-        )
+    )
+    report = certify(
+        res.params,
+        res.gains,
+        udot_max=res.udot_max,
+        decay=res.decay,
+        dt=dt,
+        allow_unbounded=allow_unbounded,
+        **({"tiers": ("sampled",)} if reuse else {}),
+    )
+    if reuse:
         report = replace(
             kept,
             dt=dt,
-            discrete_gains=smp_only.discrete_gains,
-            certificates=kept.certificates + smp_only.certificates,
-        )
-    else:
-        report = certify(
-            res.params,
-            res.gains,
-            udot_max=res.udot_max,
-            decay=res.decay,
-            dt=dt,
-            allow_unbounded=allow_unbounded,
+            discrete_gains=report.discrete_gains,
+            certificates=kept.certificates + report.certificates,
         )
     smp = report.tier("sampled")
     K = report.discrete_gains

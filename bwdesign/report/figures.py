@@ -69,13 +69,7 @@ def kept_figures(cache: Any, key: str | None) -> dict[str, bytes] | None:
     """The figures kept for the study ``key`` in ``cache`` (a StudyCache), or ``None``."""
     if cache is None or key is None:
         return None
-    payload = cache.read_extra(key, FIGURES_KIND)
-    if payload is None:
-        return None
-    try:
-        kept = pickle.loads(payload)
-    except Exception:  # noqa: BLE001 - an entry that does not load is a miss
-        return None
+    kept = cache.read_object(key, FIGURES_KIND)
     if not isinstance(kept, dict) or not all(
         isinstance(k, str) and isinstance(v, bytes) for k, v in kept.items()
     ):

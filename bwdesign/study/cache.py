@@ -126,13 +126,7 @@ class StudyCache:
 
     def load(self, key: str) -> dict[str, Any] | None:
         """The parts kept under ``key`` (``None``: a miss, also for an unreadable entry)."""
-        payload = self.store.read(key, _PARTS_KIND)
-        if payload is None:
-            return None
-        try:
-            parts = pickle.loads(payload)
-        except Exception:  # noqa: BLE001 - an entry that does not load is a miss
-            return None
+        parts = self.read_object(key, _PARTS_KIND)
         if not isinstance(parts, dict) or not set(parts) <= set(PARTS):
             return None
         return parts
@@ -146,9 +140,16 @@ class StudyCache:
             return False
         return self.store.write(key, _PARTS_KIND, buf.getvalue())
 
-    def read_extra(self, key: str, kind: str) -> bytes | None:
-        """Bytes a later layer derived from the study ``key`` (the report's figures)."""
-        return self.store.read(key, kind)
+    def read_object(self, key: str, kind: str) -> Any:
+        """The object pickled under ``key`` and ``kind`` (``None``: a miss, also for an
+        entry that does not load)."""
+        payload = self.store.read(key, kind)
+        if payload is None:
+            return None
+        try:
+            return pickle.loads(payload)
+        except Exception:  # noqa: BLE001 - an entry that does not load is a miss
+            return None
 
     def write_extra(self, key: str, kind: str, payload: bytes) -> bool:
         """Keep bytes derived from the study ``key`` under ``kind``."""
