@@ -102,6 +102,14 @@ def _add(cfg: ExtConfig, name: str, creep_taus: tuple[float, ...], amp_tau: floa
     return replace(cfg, drift=True)
 
 
+def _remove(cfg: ExtConfig, name: str) -> ExtConfig:
+    if name == "amplifier_lag":
+        return replace(cfg, amp_tau=0.0)
+    if name == "creep":
+        return replace(cfg, creep_taus=())
+    return replace(cfg, drift=False)
+
+
 def _k(cfg: ExtConfig, n_records: int) -> int:
     return cfg.n_extra + (n_records if cfg.drift else 0)
 
@@ -223,14 +231,18 @@ def _fit_candidate(m: _Model, name: str, ctx: _Ctx) -> tuple[_Model, str]:
         return _Model(cfg, prob, th, sol, m.delay), ""
     # an input delay found by the base fit may have stood in for the lag: the lag is
     # profiled without it as well, and the delay of the lower misfit on the grid is kept
-    grids = [_lag_grid(m, delay, ctx) for delay in sorted({0, m.delay})]
-    delay, scored = min(grids, key=lambda g: min(c for c, _, _ in g[1]))
+    delay, scored = _best_lag_grid(m, ctx)
     best = min(range(len(scored)), key=lambda j: scored[j][0])
     if best in (0, len(scored) - 1):
         # at an end of the range: the short refits may have stopped short; full ones decide
-        grids = [_lag_grid(m, delay, ctx, full=True) for delay in sorted({0, m.delay})]
-        delay, scored = min(grids, key=lambda g: min(c for c, _, _ in g[1]))
+        delay, scored = _best_lag_grid(m, ctx, full=True)
     return _profile_lag(m, delay, scored, ctx)
+
+
+def _best_lag_grid(m: _Model, ctx: _Ctx, *, full: bool = False) -> tuple[int, list]:
+    """:func:`_lag_grid` with and without ``m``'s input delay: the one of lower misfit."""
+    grids = [_lag_grid(m, delay, ctx, full=full) for delay in sorted({0, m.delay})]
+    return min(grids, key=lambda g: min(c for c, _, _ in g[1]))
 
 
 def _lag_grid(m: _Model, delay: int, ctx: _Ctx, *, full: bool = False) -> tuple[int, list]:
@@ -403,9 +415,7 @@ def select_extensions(
                 rows[nm] = r_nm | {"chosen": False, "delta_bic": d, "reason": why_not[nm]}
             break
         trial, note = _fit_candidate(cur, name, ctx)
-        n_eff = effective_n(cur.prob.centre(cur.prob.residual(cur.theta)))
-        dk = _k(trial.cfg, prob.n_records) - _k(cur.cfg, prob.n_records)
-        dbic = n_eff * math.log(_rss(cur) / max(_rss(trial), 1e-300)) - dk * math.log(n_eff)
+        dbic, n_eff = _delta_bic(cur, trial)
         h_trial = _heldout(trial, ctx)
         if cur.cfg.names not in held:
             held[cur.cfg.names] = _heldout(cur, ctx)
@@ -454,12 +464,18 @@ def select_extensions(
     return cur, doc
 
 
-def _criteria(cur: _Model, trial: _Model, held: dict, ctx: _Ctx) -> tuple[float, float]:
-    """BIC change (``n_eff`` from ``cur``'s residual) and held-out fit gain of ``trial``."""
+def _delta_bic(cur: _Model, trial: _Model) -> tuple[float, float]:
+    """BIC change from ``cur`` to ``trial`` on the output error, and the ``n_eff`` used
+    (from ``cur``'s residual)."""
     n_eff = effective_n(cur.prob.centre(cur.prob.residual(cur.theta)))
     r_n = cur.prob.n_records
     dk = _k(trial.cfg, r_n) - _k(cur.cfg, r_n)
-    dbic = n_eff * math.log(_rss(cur) / max(_rss(trial), 1e-300)) - dk * math.log(n_eff)
+    return n_eff * math.log(_rss(cur) / max(_rss(trial), 1e-300)) - dk * math.log(n_eff), n_eff
+
+
+def _criteria(cur: _Model, trial: _Model, held: dict, ctx: _Ctx) -> tuple[float, float]:
+    """BIC change (``n_eff`` from ``cur``'s residual) and held-out fit gain of ``trial``."""
+    dbic = _delta_bic(cur, trial)[0]
     for m in (cur, trial):
         if m.cfg.names not in held:
             held[m.cfg.names] = _heldout(m, ctx)
@@ -496,8 +512,7 @@ def _joint(cur: _Model, rows: dict, held: dict, ctx: _Ctx, say) -> _Model:
         m = _Model(cfg, prob, th, sol, cur.delay)
     if "amplifier_lag" in names:
         # from a biased optimum the short refits of the grid do not leave it: full ones
-        grids = [_lag_grid(m, delay, ctx, full=True) for delay in sorted({0, m.delay})]
-        delay, scored = min(grids, key=lambda g: min(c for c, _, _ in g[1]))
+        delay, scored = _best_lag_grid(m, ctx, full=True)
         lagged, note = _profile_lag(m, delay, scored, ctx)
         if note:  # not determined together either: the others without it
             names.remove("amplifier_lag")
@@ -511,11 +526,7 @@ def _joint(cur: _Model, rows: dict, held: dict, ctx: _Ctx, say) -> _Model:
         return cur
     # each one dropped in turn: kept only if the rest without it is worse by the criteria
     for nm in names:
-        reduced_cfg = (
-            replace(m.cfg, amp_tau=0.0)
-            if nm == "amplifier_lag"
-            else (replace(m.cfg, drift=False) if nm == "drift" else replace(m.cfg, creep_taus=()))
-        )
+        reduced_cfg = _remove(m.cfg, nm)
         prob = _build(ctx.records, m.prob.sign, reduced_cfg, m.delay)
         th, sol = ctx.refine(prob, m.theta, ctx.free, ctx.max_nfev)
         ctx.nfev += sol.nfev

@@ -33,7 +33,7 @@ from scipy.signal import lfilter
 from .problem import Problem, delayed_input
 from .stack import Stack
 
-__all__ = ["CREEP_TAUS", "ExtConfig", "ExtStack", "first_order_lag"]
+__all__ = ["CREEP_TAUS", "ExtConfig", "ExtStack", "creep_response", "first_order_lag"]
 
 #: Creep time constants (s): three, log-spaced between 0.1 s and 10 s.
 CREEP_TAUS = (0.1, 1.0, 10.0)
@@ -93,7 +93,7 @@ class ExtStack(Stack):
             c[b] = 1.0
             cols.append(c)
         for tau in config.creep_taus:
-            cols.append(np.concatenate([_creep(p.u, p.dt, tau) for p in self.problems]))
+            cols.append(np.concatenate([creep_response(p.u, p.dt, tau) for p in self.problems]))
         if config.drift:
             for k, b in enumerate(self.blocks()):
                 c = np.zeros(self.n)
@@ -202,9 +202,10 @@ class ExtStack(Stack):
         v = first_order_lag(delayed_input(rec.u, delay), rec.dt, self.config.amp_tau)
         known = np.zeros(v.size)
         for tau, w in zip(self.config.creep_taus, self.creep_weights(theta), strict=True):
-            known += w * _creep(v, rec.dt, tau)
+            known += w * creep_response(v, rec.dt, tau)
         return v, known
 
 
-def _creep(u: np.ndarray, dt: float, tau: float) -> np.ndarray:
+def creep_response(u: np.ndarray, dt: float, tau: float) -> np.ndarray:
+    """One creep column: ``L u - u`` with ``L`` the first-order lag ``tau`` (zero at DC)."""
     return first_order_lag(u, dt, tau) - u

@@ -39,7 +39,7 @@ from ..errors import BWDesignError
 from ..model.params import BoucWenParams
 from ..model.uncertainty import DisturbanceBound
 from .extend import HOLDOUT
-from .extstack import first_order_lag
+from .extstack import creep_response
 from .problem import Problem, delayed_input, theta_from_params
 from .result import IdentificationResult, validate_record
 from .stack import Stack
@@ -225,7 +225,7 @@ def creep_reserve(extensions: dict[str, Any] | None, records: list, delay: int) 
     seen, seen_rate = 0.0, 0.0
     for rec in records:
         u = delayed_input(rec.u, delay)
-        c = sum(w * (first_order_lag(u, rec.dt, t) - u) for w, t in zip(weights, taus, strict=True))
+        c = sum(w * creep_response(u, rec.dt, t) for w, t in zip(weights, taus, strict=True))
         seen = max(seen, float(np.max(np.abs(c))))
         if c.size > 2:
             seen_rate = max(seen_rate, float(np.max(np.abs(np.gradient(c, rec.dt)))))
