@@ -23,6 +23,7 @@ __all__ = [
     "search_log_contraction",
     "jump_mismatch",
     "disturbance_remainder",
+    "copy_error_bound",
 ]
 
 
@@ -103,3 +104,25 @@ def jump_mismatch(model: BoucWenParams, tp: BoucWenParams, du: float) -> float:
         return 0.0
     x = (abs(model.beta) + abs(model.gamma)) * du
     return df * du * math.exp(x) if x < 700 else math.inf
+
+
+def copy_error_bound(model: BoucWenParams, tp: BoucWenParams) -> float:
+    """Bound of ``|x3hat - x3|`` for a hysteresis copy on ``model`` and the plant ``tp``
+    driven by the same input and started together.
+
+    Along the input's path length ``s`` (``ds = |du|``, so the ZOH jump maps too),
+    ``dx/ds = alpha sgn - beta x - gamma sgn |x|`` has the one-sided Lipschitz constant
+    ``-(beta - |gamma|)``, and the two right-hand sides differ at the plant's ``x3``
+    by at most ``|dalpha| + (|dbeta| + |dgamma|) h_max(plant)``: so ``d|e|/ds <=
+    -(beta_m - |gamma_m|) |e| + D`` and ``|e| <= D / (beta_m - |gamma_m|)`` is
+    invariant (likewise with the roles swapped). Never above ``h_max(model) +
+    h_max(plant)`` (both copies stay in their own range).
+    """
+    hm, hp = model.bounded_class().h_max, tp.bounded_class().h_max
+    da = abs(model.alpha - tp.alpha)
+    dbg = abs(model.beta - tp.beta) + abs(model.gamma - tp.gamma)
+    best = math.inf
+    for kappa, h in ((model.beta - abs(model.gamma), hp), (tp.beta - abs(tp.gamma), hm)):
+        if kappa > 0:
+            best = min(best, (da + dbg * h) / kappa)
+    return min(best, hm + hp)

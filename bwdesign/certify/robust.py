@@ -125,20 +125,21 @@ from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import discretize
-from ..model.reference_cover import require_coverable, sup_abs
+from ..model.reference_cover import require_coverable
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
 from ..observers.gains import check_gains, discrete_gains
 from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
 from .ellipsoid import (
-    disturbance_remainder,
+    copy_error_bound,
     jump_mismatch,
     schur_min_eig,
     search_log_contraction,
     solution,
 )
 from .results import CONTRACTION, Margin, RobustCertificate
+from .robust_cover import cover_inputs
 
 __all__ = ["RobustCertificate", "certify_robust"]
 
@@ -312,11 +313,34 @@ def certify_robust(
     data_v = [_plant_data(st, tp) for tp in vertices]
     data_i = [_plant_data(st, tp) for tp in interior]
     data = data_v + data_i
-    hb, W, input_bounds = _cover(st, reference, data, noise_max)
-    ell = _Ellipsoids.build(st, data_v, data_i, W)
+    # both covers of the reference (.robust_cover): the smaller certified bound
+    rcs = [
+        _certify_with(st, dd, len(vertices), covered, a, noise_max)
+        for covered, dd in _covers(st, reference, data, noise_max)
+    ]
+    held = [rc for rc in rcs if rc.holds]
+    return min(held, key=lambda rc: rc.tracking_bound) if held else rcs[-1]
+
+
+def _covers(st: _Setup, reference: Reference, data: list[dict], noise_max: float):
+    """The covers of the reference's terms (:mod:`.robust_cover`): exact where it applies,
+    and per sample; each with its own copy of the plants' data."""
+    out = []
+    for exact in (True, False):
+        dd = [dict(d) for d in data]
+        covered = cover_inputs(st, reference, dd, noise_max, exact)
+        if covered is not None:
+            out.append((covered, dd))
+    return out
+
+
+def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max: float):
+    """The common ellipsoid for one cover of the inputs, checked and concluded."""
+    hb, W, input_bounds = covered
+    ell = _Ellipsoids.build(st, data[:n_v], data[n_v:], W)
     base = {
-        "n_vertices": len(vertices),
-        "n_interior": len(interior),
+        "n_vertices": n_v,
+        "n_interior": len(data) - n_v,
         "input_bounds": input_bounds,
         "noise_max": noise_max,
     }
@@ -328,10 +352,10 @@ def certify_robust(
     sol, av = _contraction(ell, a, spec, st.statics[0])
     if sol is None or not sol.ok:
         status = sol.status if sol is not None else "infeasible for every contraction tried"
-        why = f"no common Lyapunov function over the {len(vertices)} corners and {rho} ({status})"
+        why = f"no common Lyapunov function over the {n_v} corners and {rho} ({status})"
         details = {"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []}
         return _not_certified(base, why, av, details, sol.solver if sol is not None else "")
-    return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, lp.dt, base)
+    return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, st.lp.dt, base)
 
 
 def _not_certified(
@@ -464,8 +488,8 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     mats = [_matrices(lp, Fv, gv, r) for r in rhos]
     Bref, bx3 = mats[0][1][:, :5], mats[0][1][:, 5]  # rho acts on neither
     hv, j, dh = _hyst_bounds(st.params, tp, st.du)
-    if st.observer == "phdo":
-        dh += (1 - st.rho_lo) * (st.params.bounded_class().h_max + hv)
+    if st.observer == "phdo":  # the step of (rho - 1) e3 + dh, |e3| <= the copy's error
+        dh += (1 - st.rho_lo) * copy_error_bound(st.params, tp)
     # quasi-static split (module doc): z = z~ + G^-1 w_slow, G = I - A(rho_c)
     G = np.eye(n) - np.mean([A for A, _ in mats], axis=0)
     GiB = np.linalg.solve(G, Bref)  # w_slow's reference part: G^-1 Bref M sigma
@@ -488,6 +512,8 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     return {
         "blocks": blocks,
         "hyst": (hv, j, dh),
+        "Ac": np.eye(n) - G,  # the reference's own response runs at the middle rho
+        "Bref": Bref,
         "mats": mats,
         "Gib": Gib,
         "Gid": Gid,
@@ -495,55 +521,6 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
         "E": E_b,
         "rows": np.vstack(rows),
     }
-
-
-def _cover(
-    st: _Setup, reference: Reference, data: list[dict[str, Any]], noise_max: float
-) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """The reference's terms at every time, per plant; the bound of every input channel.
-
-    Sets ``chan``, ``static`` and ``step_ref`` in each plant's ``data``; returns the
-    worst hysteresis bounds ``(x3, j, dh)``, the channel bounds ``W`` and their report.
-    """
-    n, rhos = st.n, st.rhos
-    dmax, dstep = st.dist[0], st.dist[1] * st.lp.dt  # |d|, |d_{k+1} - d_k|
-    # sup over every t >= 0 of every reference row, all plants at once (refuses a
-    # reference it cannot cover: neither periodic nor settling, or no stated structure)
-    sups = sup_abs(reference, st.lp.dt, np.vstack([d["rows"] for d in data]))
-    at = 0
-    for d in data:
-        m = len(d["rows"])
-        d["sup"], at = sups[at : at + m], at + m
-        hv = d["hyst"][0]
-        chan = d["sup"][:n].copy()
-        if d["E"] is not None:
-            chan += (rhos[1] - rhos[0]) / 2 * (d["sup"][n : 2 * n] + np.abs(d["E"] @ d["Gib"]) * hv)
-            if dmax > 0:  # the rho coupling of the disturbance's quasi-static part
-                chan += (rhos[1] - rhos[0]) / 2 * np.abs(d["E"] @ d["Gid"]) * dmax
-        d["chan"] = chan
-        k = 2 * n if d["E"] is not None else n
-        d["static"] = d["sup"][k : k + 3] + np.array([abs(c @ d["Gib"]) * hv for c in st.statics])
-        if dmax > 0:
-            d["static"] = d["static"] + np.array([abs(c @ d["Gid"]) * dmax for c in st.statics])
-        d["step_ref"] = d["sup"][k + 3 :]
-    chan = np.max([d["chan"] for d in data], axis=0)
-    hb = np.max([d["hyst"] for d in data], axis=0)
-    rem = disturbance_remainder(max(d["a3"] for d in data), st.dist[1], st.lp.dt)
-    W = np.concatenate([chan, [hb[1], hb[2], noise_max, dstep], rem])
-    input_bounds = {
-        "state_channels": chan.tolist(),
-        "x3": float(hb[0]),
-        "j": float(hb[1]),
-        "dh": float(hb[2]),
-        "noise": noise_max,
-    }
-    if dmax > 0 or dstep > 0:
-        input_bounds["disturbance"] = {
-            "input_max": dmax,
-            "step": dstep,
-            "within_sample": rem.tolist(),
-        }
-    return np.concatenate([hb, rem]), W, input_bounds
 
 
 @dataclass
