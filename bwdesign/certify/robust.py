@@ -138,6 +138,7 @@ from .ellipsoid import (
     search_log_contraction,
     solution,
 )
+from .peak import l1_norms, peak_bounds
 from .results import CONTRACTION, Margin, RobustCertificate
 from .robust_cover import cover_inputs
 
@@ -314,12 +315,14 @@ def certify_robust(
     data_i = [_plant_data(st, tp) for tp in interior]
     data = data_v + data_i
     # both covers of the reference (.robust_cover): the smaller certified bound
-    rcs = [
-        _certify_with(st, dd, len(vertices), covered, a, noise_max)
-        for covered, dd in _covers(st, reference, data, noise_max)
-    ]
-    held = [rc for rc in rcs if rc.holds]
-    return min(held, key=lambda rc: rc.tracking_bound) if held else rcs[-1]
+    # the ellipsoid on the per-sample cover first (the exact one if that fails); the
+    # peak-to-peak bounds of every cover, the smallest kept (_conclude)
+    covers = _covers(st, reference, data, noise_max)
+    for covered, dd in covers[::-1]:
+        rc = _certify_with(st, dd, len(vertices), covered, a, noise_max, covers)
+        if rc.holds:
+            break
+    return rc
 
 
 def _covers(st: _Setup, reference: Reference, data: list[dict], noise_max: float):
@@ -334,7 +337,7 @@ def _covers(st: _Setup, reference: Reference, data: list[dict], noise_max: float
     return out
 
 
-def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max: float):
+def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max: float, covers):
     """The common ellipsoid for one cover of the inputs, checked and concluded."""
     hb, W, input_bounds = covered
     ell = _Ellipsoids.build(st, data[:n_v], data[n_v:], W)
@@ -355,7 +358,7 @@ def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max:
         why = f"no common Lyapunov function over the {n_v} corners and {rho} ({status})"
         details = {"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []}
         return _not_certified(base, why, av, details, sol.solver if sol is not None else "")
-    return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, st.lp.dt, base)
+    return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, st.lp.dt, base, covers)
 
 
 def _not_certified(
@@ -488,8 +491,9 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     mats = [_matrices(lp, Fv, gv, r) for r in rhos]
     Bref, bx3 = mats[0][1][:, :5], mats[0][1][:, 5]  # rho acts on neither
     hv, j, dh = _hyst_bounds(st.params, tp, st.du)
+    copy_error = copy_error_bound(st.params, tp)
     if st.observer == "phdo":  # the step of (rho - 1) e3 + dh, |e3| <= the copy's error
-        dh += (1 - st.rho_lo) * copy_error_bound(st.params, tp)
+        dh += (1 - st.rho_lo) * copy_error
     # quasi-static split (module doc): z = z~ + G^-1 w_slow, G = I - A(rho_c)
     G = np.eye(n) - np.mean([A for A, _ in mats], axis=0)
     GiB = np.linalg.solve(G, Bref)  # w_slow's reference part: G^-1 Bref M sigma
@@ -512,6 +516,7 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     return {
         "blocks": blocks,
         "hyst": (hv, j, dh),
+        "copy_error": copy_error,
         "Ac": np.eye(n) - G,  # the reference's own response runs at the middle rho
         "Bref": Bref,
         "mats": mats,
@@ -629,12 +634,12 @@ def _input_step(st: _Setup, data: list[dict], dyn, hb: np.ndarray, noise_max: fl
     worst = 0.0
     j_, dh_ = float(hb[1]), float(hb[2])
     dmax, (r1, r2) = st.dist[0], (float(hb[3]), float(hb[4]))
-    for d in data:
+    for i, d in enumerate(data):
         Gib, hv = d["Gib"], d["hyst"][0]
         for (A, B), ref in zip(d["mats"], d["step_ref"], strict=True):
             v = (A - np.eye(n)).T @ cu
             total = (
-                dyn(v)
+                dyn(v, i)
                 + float(ref)
                 + abs(v @ Gib + cu @ B[:, 5]) * hv
                 + abs(su[5]) * j_
@@ -650,6 +655,44 @@ def _input_step(st: _Setup, data: list[dict], dyn, hb: np.ndarray, noise_max: fl
                 )
             worst = max(worst, total)
     return worst
+
+
+def _peaks(st: _Setup, data: list[dict], W: np.ndarray) -> list[np.ndarray] | None:
+    """Per plant, :func:`.peak.peak_bounds` of ``|c'z~|`` for the three outputs, of
+    ``(A_c - I)'cu . z~`` and (PHSO) of ``cu'E z~``: the input step's ``z~`` part at
+    either end of ``rho``. None if any plant has none (then the ellipsoid's stand)."""
+    n, out = st.n, []
+    for d in data:
+        A_c = np.mean([A for A, _ in d["blocks"]], axis=0)
+        rows = np.array(
+            [
+                *st.statics,
+                (A_c - np.eye(n)).T @ st.cu,
+                d["E"].T @ st.cu if d["E"] is not None else np.zeros(n),
+            ]
+        )
+        Wp = W.copy()  # this plant's own channel bounds
+        Wp[: n + 2] = np.concatenate([d["chan"], d["hyst"][1:]])
+        pb = peak_bounds(d["blocks"], st.rhos, Wp, rows)
+        if pb is None:
+            return None
+        if d["E"] is None and Wp[n + 1] > 0:  # PHDO: dh also as the copy error's increment
+            step, smaller = _copy_level(d, Wp[n + 1], rows[:3])
+            pb[:3] += smaller - step
+        out.append(pb)
+    return out
+
+
+def _copy_level(d: dict, dh: float, rows: np.ndarray) -> np.ndarray:
+    """What the PHDO's ``dh`` channel ``(rho - 1) e3 + dh`` adds to ``|rows z~|``, taken
+    as a step (``|.| <= dh``) and, less where smaller, as the increment of the copy
+    error ``e3`` (``|e3| <= level``, ``.ellipsoid.copy_error_bound``): ``z~ - b e3`` sees
+    ``(A - I) b e3``, a level. Returns ``(step, smaller)``."""
+    (A, B), n = d["blocks"][0], len(d["blocks"][0][0])
+    b, level = B[:, n + 1], d["copy_error"]
+    step = l1_norms(A, b[:, None], rows)[:, 0] * dh
+    alt = l1_norms(A, ((A - np.eye(n)) @ b)[:, None], rows)[:, 0] * level
+    return step, np.minimum(step, alt + np.abs(rows @ b) * level)
 
 
 def _contraction(ell: _Ellipsoids, a: float | None, spec: float, c: np.ndarray):
@@ -688,13 +731,14 @@ def _conclude(
     spec: float,
     dt: float,
     base: dict[str, Any],
+    covers: list,
 ) -> RobustCertificate:
     """The certificate of a solved ellipsoid: outside check, bounds, decay and status."""
     sol, av = solved
     params, lp = st.params, st.lp
     margins, peak, dyn = ell.check(sol, av, st, data)
     holds = all(m.passed for m in margins)
-    step = _input_step(st, data, dyn, hb, noise_max) if holds else None
+    step = _input_step(st, data, lambda v, _: dyn(v), hb, noise_max) if holds else None
     bounds = [peak(0), None, None]
     # the estimation bounds: their own objective at the same contraction
     for i in (1, 2):
@@ -705,6 +749,18 @@ def _conclude(
                 bounds[i] = pk(i)
         if bounds[i] is None and holds:
             bounds[i] = peak(i)
+    method = "ellipsoid"
+    half = (st.rhos[-1] - st.rhos[0]) / 2
+    for (hb2, W2, _), dd in covers if holds else ():
+        l1 = _peaks(st, dd, W2)  # the per-plant peak-to-peak bounds (.peak), where smaller
+        if l1 is None:
+            continue
+        for i in range(3):
+            b = max(float(p[i]) + float(d["static"][i]) for p, d in zip(l1, dd, strict=True))
+            if bounds[i] is None or b < bounds[i]:
+                bounds[i], method = b, "peak-to-peak"
+        dyn1 = lambda v, j, l1=l1: l1[j][3] + half * l1[j][-1]  # noqa: E731
+        step = min(step, _input_step(st, dd, dyn1, hb2, noise_max))
     if bounds[1] is not None:
         bounds[1] += abs(lp.K[0]) * noise_max
     if bounds[2] is not None:
@@ -749,6 +805,7 @@ def _conclude(
             "udot_max": udot_max,
             "dt": dt,
             "input_step_bound": step,
+            "bound_method": method,
         },
         **base,
     )
