@@ -1,0 +1,212 @@
+"""Baseline controllers (issue 29): PI/PID on the measurement, the hysteresis feedforwards,
+the tuning rule, anti-windup, the Prandtl–Ishlinskii operator and its fit."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bwdesign import (
+    BaselineController,
+    ClosedLoop,
+    InputError,
+    ObserverSpec,
+    PrandtlIshlinskii,
+    Sine,
+    analyze_baseline,
+    analyze_loop,
+    fit_prandtl_ishlinskii,
+    load_config,
+    make_controller,
+    preset,
+    simulate,
+    simulate_batch,
+    simulate_continuous,
+    tune_baseline,
+)
+from bwdesign.control.baseline_tuning import sampled_plant
+from bwdesign.control.baselines import PIDState, pid_step
+from bwdesign.errors import GainError, ParameterError
+from bwdesign.identify.prandtl import model_record
+
+PAPER_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "paper_experiment.toml"
+
+DT = 2e-4
+
+
+@pytest.fixture(scope="module")
+def config():
+    return load_config(PAPER_CONFIG)
+
+
+@pytest.mark.parametrize("kind", ["pi", "pid"])
+@pytest.mark.parametrize("delay", [False, True])
+@pytest.mark.parametrize("pm", [45.0, 60.0])
+def test_tuning_rule_gives_the_stated_phase_margin(kind, delay, pm):
+    p = preset("paper_experiment")
+    c = tune_baseline(p, DT, kind=kind, phase_margin=pm, delay=delay)
+    wc = c.tuning["crossover_rad_s"]
+    # the loop at the crossover, evaluated directly: |L| = 1, arg L = -180 + pm
+    z = np.exp(1j * wc * DT)
+    cnum, cden = c.transfer()
+    pnum, pden = sampled_plant(p, DT, slope=p.alpha, delay=delay)
+    L = np.polyval(cnum, z) / np.polyval(cden, z) * np.polyval(pnum, z) / np.polyval(pden, z)
+    assert abs(abs(L) - 1.0) < 1e-9
+    assert math.degrees(np.angle(L)) + 180.0 == pytest.approx(pm, abs=1e-6)
+    a = analyze_baseline(c, p, delay=delay)
+    assert a.stable and a.spectral_radius < 1.0
+    assert a.phase_margin == pytest.approx(pm, abs=0.05)
+    assert a.crossover == pytest.approx(wc, rel=1e-3)
+    assert a.gain_margin is not None and a.gain_margin > 2.0  # > 6 dB on this stage
+    assert "not stable" not in a.describe()
+
+
+def test_destabilising_gains_are_not_stable_with_their_margins():
+    p = preset("paper_experiment")
+    c = BaselineController(60.0, 2e4, dt=DT)
+    a = analyze_baseline(c, p)
+    assert not a.stable and a.worst_radius > 1.0
+    text = a.describe()
+    assert text.startswith("not stable") and "phase margin" in text and "gain margin" in text
+    assert a.gain_margin is not None and a.gain_margin < 1.0
+
+
+def test_anti_windup_holds_the_integrator_in_saturation():
+    c = BaselineController(1.0, 100.0, dt=DT, u_limits=(0.0, 10.0)).constants()
+    s = PIDState(0.05, 0.0, 0.0)
+    clip = lambda v, lo, hi: min(max(v, lo), hi)  # noqa: E731
+    for _ in range(10_000):  # a large positive error: saturated high all along
+        u = pid_step(c, s, 0.0, 50.0, 0.0, clip)
+        assert u == 10.0
+    assert s.q == 0.05  # frozen, not 10000 * dt * 50 = 100
+    u = pid_step(c, s, 52.0, 50.0, 0.0, clip)  # the error changes sign: integrates again
+    assert s.q == pytest.approx(0.05 - DT * 2.0)
+    assert u == pytest.approx(-2.0 + 100.0 * (0.05 - DT * 2.0))  # inside the limits
+    for _ in range(100):  # a large negative error: saturated low, held again
+        assert pid_step(c, s, 100.0, 50.0, 0.0, clip) == 0.0
+    assert s.q == pytest.approx(0.05 - DT * 2.0)
+
+
+def test_anti_windup_loop_recovers_after_saturation(config):
+    """A limit below what the reference needs at its top: saturated part of the period,
+    bounded, and back on the reference soon after."""
+    lo, hi = 0.0, 120.0  # the 1 Hz sine needs up to about 130 V at its top
+    loop = ClosedLoop.baseline_from_config(config, "pi-bwff").replace(
+        controller=tune_baseline(config.plant, DT, u_limits=(lo, hi))
+    )
+    r = simulate(loop, config.reference, duration=3.0)
+    assert r.stable
+    assert 0.0 < r.saturated_fraction < 0.3
+    at_limit = (r.u >= hi) | (r.u <= lo)
+    free = ~at_limit & (r.t > 1.0)
+    # away from the limit (and 50 ms after leaving it) the PI tracks to well under 5 um
+    last = np.maximum.accumulate(np.where(at_limit, r.t, -np.inf))
+    settled = free & (r.t - last > 0.05)
+    assert settled.any() and np.max(np.abs(r.e[settled])) < 5.0
+
+
+def test_prandtl_inverse_composes_to_identity():
+    rng = np.random.default_rng(3)
+    op = PrandtlIshlinskii((0.0, 0.7, 1.5, 2.4, 4.0), tuple(rng.uniform(0.05, 1.0, 5)), offset=-2.5)
+    t = np.linspace(0, 4, 3001)
+    u = 6 * np.sin(2 * np.pi * t) * (1 - 0.2 * t) + rng.normal(0, 0.3, t.size) + 1.0
+    y = op(u)
+    inv = op.inverse()
+    assert np.max(np.abs(inv(y) - u)) < 1e-9
+    assert np.max(np.abs(op(inv(y)) - y)) < 1e-9
+
+
+def test_prandtl_fit_recovers_known_weights():
+    t = np.arange(3000) * 1e-3
+    u = 40 + 30 * np.sin(2 * np.pi * 0.5 * t) * (1 - 0.25 * t)
+    n = 8
+    half = 0.5 * float(np.ptp(u))
+    weights = (0.9, 0.3, 0.0, 0.15, 0.2, 0.0, 0.05, 0.1)
+    true = PrandtlIshlinskii(tuple(i * half / n for i in range(n)), weights, offset=3.0)
+    fit = fit_prandtl_ishlinskii((t, u, true(u)), n_operators=n)
+    assert np.allclose(fit.operator.weights, weights, atol=1e-8)
+    assert fit.operator.offset == pytest.approx(3.0, abs=1e-7)
+    assert fit.rmse < 1e-8
+
+
+def test_prandtl_fit_refuses_bad_records():
+    t = np.arange(1000) * 1e-3
+    u = 10 * np.sin(2 * np.pi * t)
+    op = PrandtlIshlinskii((0.0, 1.0, 2.0), (1.0, 0.5, 0.2))
+    with pytest.raises(InputError, match="does not rise with the input"):
+        fit_prandtl_ishlinskii((t, u, -op(u)))  # non-monotone: the output falls as u rises
+    t_bad = t.copy()
+    t_bad[500] = t_bad[499]
+    with pytest.raises(InputError, match="not increasing"):
+        fit_prandtl_ishlinskii((t_bad, u, op(u)))
+    with pytest.raises(InputError, match="NaN"):
+        fit_prandtl_ishlinskii((t, np.where(t > 0.5, np.nan, u), op(u)))
+    with pytest.raises(InputError):
+        fit_prandtl_ishlinskii((t, u, op(u)), n_operators=1)
+
+
+def test_prandtl_operator_refuses_bad_parameters():
+    with pytest.raises(ParameterError, match="not invertible"):
+        PrandtlIshlinskii((0.0, 1.0), (1.0, -1.5)).inverse()
+    with pytest.raises(ParameterError, match="start at 0"):
+        PrandtlIshlinskii((0.5, 1.0), (1.0, 1.0))
+    with pytest.raises(ParameterError, match="differ in length"):
+        PrandtlIshlinskii((0.0, 1.0), (1.0,))
+
+
+def test_prandtl_fit_of_the_model_is_close():
+    p = preset("paper_experiment")
+    fit = fit_prandtl_ishlinskii(model_record(p, (20.0, 180.0)))
+    assert fit.operator.invertible()
+    assert fit.rmse < 0.01 * fit.range  # within 1 % of the range on the Bouc-Wen loops
+
+
+def test_bad_gains_and_inconsistent_loops(config):
+    with pytest.raises(GainError):
+        BaselineController(-1.0, 1.0, dt=DT)
+    with pytest.raises(GainError):
+        BaselineController(1.0, 0.0, dt=DT)
+    with pytest.raises(GainError, match="tf"):
+        BaselineController(1.0, 1.0, kd=1e-3, dt=DT)
+    with pytest.raises(GainError, match="kp, ki, kd, tf"):
+        ClosedLoop.baseline_from_config(config, "pid", gains=(1.0, 2.0))
+    p = config.plant
+    base = ClosedLoop.baseline_from_config(config, "pi")
+    assert base.baseline and base.observer is None
+    with pytest.raises(InputError, match="without an observer"):
+        base.replace(observer=ObserverSpec.of("phso", (8.0, 64.0, -512.0)))
+    with pytest.raises(InputError, match="built for dt"):
+        base.replace(controller=tune_baseline(p, 1e-4))
+    with pytest.raises(InputError, match="needs an observer"):
+        ClosedLoop(p, None, make_controller(p, 1.0, 2.0), dt=DT)
+    with pytest.raises(InputError, match="no observer"):
+        analyze_loop(base)
+    with pytest.raises(InputError, match="no observer"):
+        simulate_continuous(base, config.reference, duration=0.1)
+    with pytest.raises(InputError, match="baseline kind"):
+        ClosedLoop.baseline_from_config(config, "pi-xyz")
+
+
+def test_inverse_bouc_wen_feedforward_is_exact_on_the_model(config):
+    r = simulate(ClosedLoop.baseline_from_config(config, "pi-bwff"), config.reference, duration=3)
+    assert r.stable and r.metrics.me < 1e-6 and r.estimation_rmse is None
+    assert np.isnan(r.xhat).all()
+
+
+@pytest.mark.parametrize("kind", ["pi", "pid", "pi-bwff", "pi-piff"])
+def test_batch_agrees_with_simulate(config, kind):
+    p = config.plant
+    plants = [p, dataclasses.replace(p, a1=1.02 * p.a1, alpha=0.9 * p.alpha)]
+    ref = Sine(amplitude=80.0, offset=100.0, frequency=5.0)
+    loop = ClosedLoop.baseline_from_config(config, kind, delay=True)
+    b = simulate_batch(loop, ref, plants, duration=0.6, noise_std=[0.0, 0.02], seeds=[0, 4])
+    for i, tp in enumerate(plants):
+        r = simulate(loop, ref, duration=0.6, true_params=tp, noise_std=[0.0, 0.02][i], seed=4 * i)
+        assert b.stable[i] and r.stable
+        for name in ("me", "maxe", "rmse"):
+            assert getattr(b, name)[i] == pytest.approx(getattr(r.metrics, name), rel=1e-9)
+        assert np.isnan(b.estimation_rmse[i]).all()
