@@ -4,6 +4,7 @@ the tuning rule, anti-windup, the Prandtl–Ishlinskii operator and its fit."""
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from bwdesign import (
     ObserverSpec,
     PrandtlIshlinskii,
     Sine,
+    UncertaintyBox,
     analyze_baseline,
     analyze_loop,
     fit_prandtl_ishlinskii,
@@ -28,6 +30,7 @@ from bwdesign import (
     simulate_continuous,
     tune_baseline,
 )
+from bwdesign.cli.main import main
 from bwdesign.control.baseline_tuning import sampled_plant
 from bwdesign.control.baselines import PIDState, pid_step
 from bwdesign.errors import GainError, ParameterError
@@ -210,3 +213,67 @@ def test_batch_agrees_with_simulate(config, kind):
         for name in ("me", "maxe", "rmse"):
             assert getattr(b, name)[i] == pytest.approx(getattr(r.metrics, name), rel=1e-9)
         assert np.isnan(b.estimation_rmse[i]).all()
+
+
+# -- the command line ------------------------------------------------------------------
+
+CLI = ["simulate", "--plant", str(PAPER_CONFIG), "--start-on-reference"]
+
+
+@pytest.mark.parametrize("kind", ["pi", "pid", "pi-bwff", "pi-piff"])
+def test_cli_simulate_runs_each_baseline(kind, capsys, config):
+    assert main([*CLI, "--controller", kind, "--duration", "3", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["controller"] == kind and doc["observer"] is None
+    assert doc["estimation_rmse"] is None and doc["nominal_loop"]["stable"]
+    assert doc["nominal_loop"]["phase_margin_deg"] == pytest.approx(60.0, abs=0.05)
+    # the same numbers as the Python API on the same loop
+    r = simulate(ClosedLoop.baseline_from_config(config, kind), config.reference, duration=3.0)
+    assert doc["metrics"]["me"] == r.metrics.me and doc["metrics"]["maxe"] == r.metrics.maxe
+
+
+def test_cli_mismatch_reproduces_a_box_corner(capsys, config):
+    box = UncertaintyBox.from_dict({"a1": {"rel": 0.02}, "alpha": {"rel": 0.1}})
+    corner = box.vertices(config.plant)[1]  # a1 low, alpha high
+    assert main([*CLI, "--controller", "pi", "--duration", "3", "--json",
+                 "--mismatch", "a1=-2.0%,alpha=+10.0%"]) == 0  # fmt: skip
+    doc = json.loads(capsys.readouterr().out)
+    r = simulate(
+        ClosedLoop.baseline_from_config(config, "pi"),
+        config.reference,
+        duration=3.0,
+        true_params=corner,
+    )
+    assert doc["settings"]["true_plant"]["a1"] == corner.a1
+    assert doc["settings"]["true_plant"]["alpha"] == corner.alpha
+    assert doc["metrics"]["me"] == r.metrics.me
+
+
+def test_cli_destabilising_gains_say_not_stable_with_margins(capsys):
+    code = main([*CLI, "--controller", "pid", "--kp", "60", "--ki", "20000", "--kd", "0.001",
+                 "--tf", "1e-4", "--duration", "0.5"])  # fmt: skip
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "nominal linear loop: not stable: phase margin" in out and "gain margin" in out
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--controller", "pi", "--gains", "1,2,3"], "has no observer"),
+        (["--controller", "pi", "--observer", "eso"], "has no observer"),
+        (["--controller", "pi", "--kp", "1"], "needs --kp, --ki"),
+        (["--controller", "pid", "--kp", "1", "--ki", "2"], "--kd, --tf"),
+        (["--controller", "pi", "--kp", "1", "--ki", "2", "--phase-margin", "50"], "not both"),
+        (["--kp", "1"], "baseline --controller only"),
+        (["--controller", "pi", "--phase-margin", "5"], "phase_margin"),
+        (["--controller", "pi", "--mismatch", "a9=2%"], "--mismatch"),
+        (["--controller", "pi", "--mismatch", "a1=2%", "--true-plant", "paper_experiment"],
+         "not both"),
+        (["--controller", "pi", "--kp", "-1", "--ki", "2"], "kp"),
+    ],
+)  # fmt: skip
+def test_cli_baseline_bad_input(extra, message, capsys):
+    assert main([*CLI, "--duration", "1", *extra]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and message in err[0]
