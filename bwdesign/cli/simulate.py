@@ -44,6 +44,7 @@ from ..control.controllers import TuningWarning, make_controller
 from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..design.tuning import digital_tuning
 from ..model.config import load_plant
+from ..model.mismatch import apply_mismatch
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference, Sine, Step, Triangle
 from ..observers.spec import N_GAINS, OBSERVER_KINDS, ObserverSpec
@@ -341,7 +342,7 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
         raise UsageError("give --true-plant or --mismatch, not both")
     true_params = load_plant(args.true_plant) if args.true_plant else None
     if args.mismatch:
-        true_params = parse_mismatch(args.mismatch, params)
+        true_params = apply_mismatch(args.mismatch, params, name="--mismatch")
     if args.controller != "eq12":
         return _baseline_request(args, stage, true_params)
     given = [f"--{o.replace('_', '-')}" for o in _BASELINE_OPTIONS if getattr(args, o) is not None]
@@ -423,30 +424,6 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
         tuning=tuning,
         options=dict(vars(args)),
     )
-
-
-def parse_mismatch(text: str, params: BoucWenParams) -> BoucWenParams:
-    """The ``--plant`` model with the changes of ``--mismatch`` (``a1=+2%,alpha=-0.01``).
-
-    ``NAME=+W%`` adds ``W/100 |value|`` (the arithmetic of an ``[uncertainty]`` box's
-    ``rel`` corner, so a corner is reproduced exactly), ``NAME=-W`` subtracts ``W``.
-    """
-    changes: dict[str, float] = {}
-    for item in filter(None, (s.strip() for s in str(text).split(","))):
-        key, sep, value = (v.strip() for v in item.partition("="))
-        if not sep or key not in MODEL_FIELDS or key in changes:
-            raise UsageError(
-                f"--mismatch: expected NAME=CHANGE, each NAME once among "
-                f"{', '.join(MODEL_FIELDS)}, got {item!r}"
-            )
-        rel = value.endswith("%")
-        w = finite_float(value[:-1] if rel else value)
-        v = getattr(params, key)
-        hw = abs(w) / 100 * abs(v) if rel else abs(w)
-        changes[key] = v - hw if w < 0 else v + hw
-    if not changes:
-        raise UsageError("--mismatch: no parameter given")
-    return params.replace(**changes, name=f"{params.name}/mismatch")
 
 
 def _baseline_request(args: argparse.Namespace, stage: Stage, true_params) -> SimulateRequest:

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import GainError, InputError
+from ..model.config import BASELINE_KINDS
 from ..model.envelope import feedforward_input
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt
@@ -58,9 +59,6 @@ __all__ = [
     "pid_step",
     "BASELINE_KINDS",
 ]
-
-#: The baseline controllers, by their command-line names.
-BASELINE_KINDS = ("pi", "pid", "pi-bwff", "pi-piff")
 
 
 class InverseBoucWenFeedforward:
