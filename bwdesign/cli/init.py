@@ -141,8 +141,7 @@ _HEADINGS = {
     "uncertainty": "parameter half-widths: the sweep's box, the requirements' corners (optional)",
     "sweep": "a Monte Carlo sweep over [uncertainty] in the report (optional; needs it)",
     "requirements": "what `bwdesign check` and your CI demand of the stage (optional)",
-    "baseline": "a PI/PID baseline (no observer) the requirement baseline_stable checks "
-    "(optional)",
+    "baseline": "a PI/PID baseline (no observer) the requirement baseline_stable checks (optional)",
 }
 _SECTION_ORDER = (
     "plant",
