@@ -277,3 +277,88 @@ def test_cli_baseline_bad_input(extra, message, capsys):
     assert main([*CLI, "--duration", "1", *extra]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and message in err[0]
+
+
+# -- the study's comparison and the check ------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def comparison(config):
+    from bwdesign.design.tuning import digital_tuning
+    from bwdesign.study.baselines import baseline_comparison
+
+    ref = Sine(amplitude=80.0, offset=100.0, frequency=20.0)  # 0.15 s runs: cheap
+    tuning = digital_tuning(config.plant, config.dt)
+    return baseline_comparison(config, gains=config.gains, tuning=tuning, reference=ref)
+
+
+def test_comparison_rows_and_winners(comparison):
+    labels = [r.label for r in comparison.rows]
+    assert labels[:4] == ["PI", "PID", "PI + inverse Bouc-Wen", "PI + Prandtl-Ishlinskii"]
+    assert "PHDO (digital tuning)" in labels and len(labels) == 10
+    assert comparison.box_source == "default" and comparison.corners == 64
+    for where in ("nominal", "worst"):
+        w = getattr(comparison, f"{where}_winner")
+        stable = [getattr(r, where) for r in comparison.rows if getattr(r, where).stable]
+        assert w.me == min(o.me for o in stable)
+        other = [
+            getattr(r, where).me
+            for r in comparison.rows
+            if r.baseline != w.baseline and getattr(r, where).stable
+        ]
+        assert w.factor == pytest.approx(min(other) / w.me)
+    for r in comparison.rows:  # the worst corner is no better than the nominal plant
+        if r.nominal.stable and r.worst.stable:
+            assert r.worst.me >= r.nominal.me * (1 - 1e-12)
+
+
+@pytest.mark.parametrize("label", ["PI + inverse Bouc-Wen", "PHDO (digital tuning)"])
+def test_comparison_commands_reproduce_the_numbers(comparison, label, capsys):
+    row = next(r for r in comparison.rows if r.label == label)
+    for outcome in (row.nominal, row.worst):
+        code = main([*outcome.command, "--json"])
+        doc = json.loads(capsys.readouterr().out)
+        assert code == 0
+        assert doc["metrics"]["me"] == outcome.me and doc["metrics"]["maxe"] == outcome.maxe
+
+
+def _stage(tmp_path, body: str):
+    text = PAPER_CONFIG.read_text().split("[requirements]")[0]
+    path = tmp_path / "stage.toml"
+    path.write_text(text + body)
+    return str(path)
+
+
+def test_check_baseline_stable(tmp_path, capsys):
+    bad = _stage(
+        tmp_path,
+        '[baseline]\nkind = "pid"\ngains = [60.0, 20000.0, 0.001, 0.0001]\n\n'
+        "[requirements]\nbaseline_stable = true\n",
+    )
+    assert main(["check", bad, "--no-cache"]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL" in out and "baseline_stable" in out and "not stable: phase margin" in out
+    good = _stage(
+        tmp_path, '[baseline]\nkind = "pi-bwff"\n\n[requirements]\nbaseline_stable = true\n'
+    )
+    assert main(["check", good, "--no-cache"]) == 0
+    assert "PASS" in capsys.readouterr().out
+    missing = _stage(tmp_path, "[requirements]\nbaseline_stable = true\n")
+    assert main(["check", missing, "--no-cache"]) == 2
+    assert "[baseline]" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "body, message",
+    [
+        ('kind = "p"\n', "kind must be one of"),
+        ('kind = "pid"\ngains = [1.0, 2.0]\n', "[kp, ki, kd, tf]"),
+        ('kind = "pi"\ngains = [1.0, 2.0]\nphase_margin = 50.0\n', "not both"),
+        ('kind = "pi"\nfoo = 1\n', "unknown key"),
+    ],
+)
+def test_baseline_section_bad_input(tmp_path, body, message):
+    from bwdesign.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=message):
+        load_config(_stage(tmp_path, "[baseline]\n" + body))
