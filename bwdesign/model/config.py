@@ -234,10 +234,11 @@ def _sweep(table: Any) -> dict[str, Any] | None:
             out[key] = t[key]
     if "observers" in t:
         obs = t["observers"]
-        allowed = ("phso", "eso", "phdo")
+        allowed = ("phso", "eso", "phdo", *BASELINE_KINDS)
         if not isinstance(obs, list) or not obs or any(o not in allowed for o in obs):
             raise ConfigError(
-                f'[sweep] observers must be a list of "phso", "eso", "phdo", got {obs!r}'
+                f"[sweep] observers must be a list of {', '.join(map(repr, allowed))} (the "
+                f"last {len(BASELINE_KINDS)}: baselines, no observer), got {obs!r}"
             )
         twice = sorted({o for o in obs if obs.count(o) > 1})
         if twice:
