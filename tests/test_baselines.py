@@ -35,6 +35,7 @@ from bwdesign.control.baseline_tuning import sampled_plant
 from bwdesign.control.baselines import PIDState, pid_step
 from bwdesign.errors import GainError, ParameterError
 from bwdesign.identify.prandtl import model_record
+from bwdesign.study.baselines import DEFAULT_BOX
 
 PAPER_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "paper_experiment.toml"
 
@@ -362,3 +363,39 @@ def test_baseline_section_bad_input(tmp_path, body, message):
 
     with pytest.raises(ConfigError, match=message):
         load_config(_stage(tmp_path, "[baseline]\n" + body))
+
+
+def test_sweep_runs_baselines_as_rows(config):
+    from bwdesign.design.tuning import digital_tuning
+    from bwdesign.model.params import MODEL_FIELDS
+    from bwdesign.sim.sweep import SweepSpec, draw_scenarios, run_sweep
+
+    tune = digital_tuning(config.plant, config.dt)
+    ref = Sine(amplitude=80.0, offset=100.0, frequency=20.0)
+    spec = SweepSpec(
+        loop=ClosedLoop.from_config(config, law=tune).replace(delay=False),
+        reference=ref,
+        duration=0.15,
+        gains=tuple(tune.gains),
+        observers=("phdo", "pi", "pi-piff"),
+        box=DEFAULT_BOX,
+    )
+    sc = draw_scenarios(config.plant, DEFAULT_BOX, 5, seed=2)
+    one = run_sweep(spec, sc, chunk_size=5, workers=0)
+    many = run_sweep(spec, sc, chunk_size=2, workers=0)
+    for k in ("me", "maxe", "rmse"):
+        assert np.array_equal(one[k], many[k])
+    rows = one["observer"] == "pi-piff"
+    assert rows.sum() == 5 and np.isnan(one["est_rmse_x1"][rows]).all()
+    i = int(np.flatnonzero(rows)[3])
+    tp = dataclasses.replace(config.plant, **{k: float(one[k][i]) for k in MODEL_FIELDS})
+    loop = ClosedLoop.baseline_from_config(config, "pi-piff").replace(start="reference")
+    r = simulate(loop, ref, duration=0.15, true_params=tp)
+    assert one["me"][i] == pytest.approx(r.metrics.me, rel=1e-9)
+    with pytest.raises(InputError, match="sweep observers"):
+        SweepSpec(loop=spec.loop, reference=ref, duration=0.15, gains=spec.gains, observers=("p",))
+
+
+def test_sweep_section_accepts_baselines(tmp_path):
+    cfg = load_config(_stage(tmp_path, '[sweep]\nsamples = 3\nobservers = ["phso", "pi-bwff"]\n'))
+    assert cfg.sweep["observers"] == ("phso", "pi-bwff")
