@@ -110,8 +110,18 @@ class PrandtlIshlinskii:
         return out
 
     def __call__(self, v: Any, z0: Any = None) -> np.ndarray:
-        """The operator's output along ``v`` (output unit)."""
-        return self.plays(v, z0) @ np.asarray(self.weights) + self.offset
+        """The operator's output along ``v`` (output unit).
+
+        Summed in a fixed order, ``((w_0 z_0 + w_1 z_1) + ...) + c``, the order the
+        exported C performs (:mod:`bwdesign.codegen.baselines`), so float64 C agrees
+        bit for bit.
+        """
+        z = self.plays(v, z0)
+        w = self.weights
+        out = z[:, 0] * w[0]
+        for i in range(1, self.n):
+            out = out + z[:, i] * w[i]
+        return out + self.offset
 
     def inverse(self) -> PrandtlIshlinskii:
         """The analytic inverse (module docstring): maps the output back to the input.
