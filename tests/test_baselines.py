@@ -7,8 +7,10 @@ import dataclasses
 import json
 import math
 import os
+import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -464,3 +466,20 @@ def test_export_refuses_pi_bwff_and_bad_options(config, tmp_path, capsys):
     doc = json.loads(capsys.readouterr().out)
     assert doc["controller"]["kind"] == "pid" and doc["nominal_loop"]["stable"]
     assert sorted(doc["files"]) == ["bw.c", "bw.h", "export.json", "harness.c"]
+
+
+def test_plugin_turns_baseline_stable_into_an_item(tmp_path):
+    root = Path(__file__).resolve().parents[1]
+    text = PAPER_CONFIG.read_text().split("[requirements]")[0]
+    body = '[baseline]\nkind = "pid"\ngains = [60.0, 20000.0, 0.001, 0.0001]\n\n'
+    (tmp_path / "stage.toml").write_text(text + body + "[requirements]\nbaseline_stable = true\n")
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", PYTHONPATH=str(root))
+    res = subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-rf",
+         "--bwdesign-configs", "stage.toml"],
+        cwd=tmp_path, capture_output=True, text=True, env=env, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 1, res.stdout + res.stderr
+    assert re.search(r"\b1 failed\b", res.stdout)
+    assert "the [baseline] controller's nominal loop is stable" in res.stdout
+    assert "not stable: phase margin" in res.stdout
