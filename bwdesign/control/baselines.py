@@ -37,6 +37,7 @@ crossover on the sampled nominal linear model).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -61,6 +62,14 @@ __all__ = [
 ]
 
 
+@functools.lru_cache(maxsize=8)
+def _inverse_input(params, reference, t_bytes: bytes, allow_unbounded: bool) -> np.ndarray:
+    t = np.frombuffer(t_bytes, dtype=float)
+    u, _, _ = feedforward_input(params, reference, t, allow_unbounded=allow_unbounded)
+    u.setflags(write=False)
+    return u
+
+
 class InverseBoucWenFeedforward:
     """Feedforward by the exact inverse of the Bouc–Wen model ``params``.
 
@@ -78,11 +87,19 @@ class InverseBoucWenFeedforward:
         self.allow_unbounded = bool(allow_unbounded)
 
     def samples(self, reference: Reference, t: np.ndarray) -> np.ndarray:
-        """The feedforward input at the times ``t`` (s), input unit."""
-        u, _, _ = feedforward_input(
-            self.params, reference, np.asarray(t, dtype=float), allow_unbounded=self.allow_unbounded
-        )
-        return u
+        """The feedforward input at the times ``t`` (s), input unit.
+
+        The last few are kept (a run, its batch over the corners and a replay share one).
+        """
+        t = np.ascontiguousarray(t, dtype=float)
+        key = (self.params, reference, t.tobytes(), self.allow_unbounded)
+        try:
+            return _inverse_input(*key).copy()
+        except TypeError:  # a reference that cannot be hashed: computed each time
+            u, _, _ = feedforward_input(
+                self.params, reference, t, allow_unbounded=self.allow_unbounded
+            )
+            return u
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": self.kind, "model": self.params.to_dict()}
