@@ -18,6 +18,8 @@ __all__ = ["baselines_section", "winner_sentence"]
 
 def _cells(o: LoopOutcome) -> list[str]:
     sat = "no limits" if o.saturated is None else fmt(100 * o.saturated, 3)
+    if o.status.startswith("not run"):
+        return ["not run", "-", "-", "-"]
     if not o.stable:
         return ["unstable", "-", "-", sat]
     return [fmt(o.me), fmt(o.maxe), fmt(o.rmse), sat]
@@ -73,6 +75,9 @@ def baselines_section(doc: Document, study: Study) -> None:
     header += [f"worst ME ({lu})", f"worst MAXE ({lu})", f"worst RMSE ({lu})", "worst sat. (%)"]
     rows = [[r.label, *_cells(r.nominal), *_cells(r.worst)] for r in b.rows]
     doc.table(header, rows, id="baselines")
+    gone = [f"{r.label}: {r.nominal.status}" for r in b.rows if r.nominal.status.startswith("not")]
+    if gone:
+        doc.para("Not run: " + "; ".join(gone) + ".")
     doc.para(
         winner_sentence(b.nominal_winner, "On the nominal model", lu)
         + " "

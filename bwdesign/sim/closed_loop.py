@@ -259,7 +259,12 @@ def _simulate_baseline(run: Run, noise_std, seed, window, input_disturbance, tru
         zk = s.x1 + noise[k]
         X[k, 0], X[k, 1], X[k, 2] = s.x1, s.x2, s.x3
         Z[k] = zk
-        U[k], _ = advance_baseline(c, s, k, zk)
+        try:
+            U[k], _ = advance_baseline(c, s, k, zk)
+        except OverflowError:  # the hysteresis step of a plant outside the bounded class
+            U[k] = math.nan
+            stable, status, m = False, f"diverged at t = {(k + 1) * dt:.6g} s: overflow", k + 1
+            break
         why = diverged(limit, w0, s.x1, s.x2, s.x3, 0.0, 0.0, 0.0, s.ua)
         if why is not None:
             stable, status, m = False, f"diverged at t = {(k + 1) * dt:.6g} s: {why}", k + 1

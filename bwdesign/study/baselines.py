@@ -30,6 +30,7 @@ import numpy as np
 
 from ..control.baseline_tuning import BaselineAnalysis, analyze_baseline
 from ..control.loop import ClosedLoop
+from ..errors import BWDesignError
 from ..model.config import BASELINE_KINDS, StageConfig
 from ..model.mismatch import corner_text
 from ..model.references import Reference, Sine, Step, Triangle
@@ -303,11 +304,16 @@ def baseline_comparison(
     rows: list[ComparisonRow] = []
     window = None
     for kind in BASELINE_KINDS:
-        loop = ClosedLoop.baseline_from_config(config, kind, allow_unbounded=allow_unbounded)
         cmd = _baseline_command(config, kind, duration, limits, allow_unbounded) + extra
-        r = simulate(loop, ref, duration=duration)
+        try:
+            loop = ClosedLoop.baseline_from_config(config, kind, allow_unbounded=allow_unbounded)
+            r = simulate(loop, ref, duration=duration)
+            worst = _worst(loop, ref, duration, plants, cmd, box, params)
+        except BWDesignError as err:  # e.g. no exact inverse outside the bounded class
+            gone = LoopOutcome(False, f"not run: {err}", None, None, None, None, tuple(cmd))
+            rows.append(ComparisonRow(BASELINE_LABELS[kind], True, gone, gone))
+            continue
         window = r.window
-        worst = _worst(loop, ref, duration, plants, cmd, box, params)
         rows.append(ComparisonRow(BASELINE_LABELS[kind], True, _outcome(r, cmd, None), worst))
     observer_loops = report_loops(
         config, gains=gains, tuning=tuning, allow_unbounded=allow_unbounded
@@ -315,6 +321,7 @@ def baseline_comparison(
     for label, loop in observer_loops.items():
         cmd = simulate_command(config, loop, duration, allow_unbounded) + extra
         r = known[label].result if label in known else simulate(loop, ref, duration=duration)
+        window = r.window
         worst = _worst(loop, ref, duration, plants, cmd, box, params)
         rows.append(ComparisonRow(label, False, _outcome(r, cmd, None), worst))
     return BaselineComparison(
