@@ -43,10 +43,12 @@ reports: $(STAMP)
 	  $(BIN)/bwdesign report --config $$c --out reports/$$(basename $$c .toml) || exit $$?; \
 	done
 
-# the paper reproduction: observer comparison (Section 4.1) and Tables 1-2
+# the paper reproduction: observer comparison (Section 4.1) and Tables 1-2, and the
+# baselines beside the observer loops (issue 29)
 paper: $(STAMP)
 	$(BIN)/python analysis/observer_comparison.py --out reports/observers
 	$(BIN)/python analysis/paper_tables.py --out reports/paper
+	$(BIN)/python analysis/baselines_table.py --out reports/baselines
 
 lint: $(STAMP)
 	$(BIN)/ruff check bwdesign tests analysis benchmarks examples

@@ -43,6 +43,17 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     from .certify.tiers import certify, certify_discrete
     from .codegen.export import CExport, export_c
     from .control.analysis import LoopAnalysis, analyze_loop, mismatch_sweep
+    from .control.baseline_tuning import (
+        BaselineAnalysis,
+        analyze_baseline,
+        make_baseline,
+        tune_baseline,
+    )
+    from .control.baselines import (
+        BaselineController,
+        InverseBoucWenFeedforward,
+        PrandtlFeedforward,
+    )
     from .control.controllers import (
         DiscreteTrackingController,
         TrackingController,
@@ -55,10 +66,12 @@ if TYPE_CHECKING:  # the same names for type checkers (the package ships py.type
     from .design.robust_observer import RobustObserverSynthesis, synthesize_robust_observer
     from .design.tuning import DigitalTuning, digital_tuning
     from .identify import IdentificationResult, identify
+    from .identify.prandtl import PrandtlFit, fit_prandtl_ishlinskii
     from .model.config import ControllerSettings, StageConfig, load_config, load_plant
     from .model.envelope import Envelope, derive_envelope, given_envelope
     from .model.params import PRESETS, BoucWenParams, BoundedClassVerdict, PhysicalParams, preset
     from .model.plant import hysteresis_increment, simulate_zoh, zoh_step
+    from .model.prandtl import PrandtlIshlinskii
     from .model.references import Sine, Step, Triangle
     from .model.stage_presets import stage_presets
     from .model.uncertainty import DisturbanceBound, UncertaintyBox
@@ -91,6 +104,17 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".certify.tiers": ("certify", "certify_discrete"),
     ".codegen.export": ("CExport", "export_c"),
     ".control.analysis": ("LoopAnalysis", "analyze_loop", "mismatch_sweep"),
+    ".control.baseline_tuning": (
+        "BaselineAnalysis",
+        "analyze_baseline",
+        "make_baseline",
+        "tune_baseline",
+    ),
+    ".control.baselines": (
+        "BaselineController",
+        "InverseBoucWenFeedforward",
+        "PrandtlFeedforward",
+    ),
     ".control.controllers": (
         "DiscreteTrackingController",
         "TrackingController",
@@ -103,6 +127,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
     ".design.robust_observer": ("RobustObserverSynthesis", "synthesize_robust_observer"),
     ".design.tuning": ("DigitalTuning", "digital_tuning"),
     ".identify": ("IdentificationResult", "identify"),
+    ".identify.prandtl": ("PrandtlFit", "fit_prandtl_ishlinskii"),
     ".model.config": ("ControllerSettings", "StageConfig", "load_config", "load_plant"),
     ".model.envelope": ("Envelope", "derive_envelope", "given_envelope"),
     ".model.params": (
@@ -113,6 +138,7 @@ _LAZY: dict[str, tuple[str, ...]] = {
         "preset",
     ),
     ".model.plant": ("hysteresis_increment", "simulate_zoh", "zoh_step"),
+    ".model.prandtl": ("PrandtlIshlinskii",),
     ".model.references": ("Sine", "Step", "Triangle"),
     ".model.stage_presets": ("stage_presets",),
     ".model.uncertainty": ("UncertaintyBox", "DisturbanceBound"),
@@ -216,6 +242,16 @@ __all__ = [
     "IdentificationResult",
     "UncertaintyBox",
     "DisturbanceBound",
+    "BaselineController",
+    "InverseBoucWenFeedforward",
+    "PrandtlFeedforward",
+    "BaselineAnalysis",
+    "analyze_baseline",
+    "make_baseline",
+    "tune_baseline",
+    "PrandtlIshlinskii",
+    "PrandtlFit",
+    "fit_prandtl_ishlinskii",
 ]
 
 

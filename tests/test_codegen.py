@@ -366,10 +366,10 @@ def test_runtime_guard_flags_uncertified_steps(tmp_path, config):
 
 def test_a_template_missing_a_value_is_an_internal_error():
     """A template asking for a value the exporter does not give is a bug: loud, not bad input."""
-    from bwdesign.codegen.export import _fill
+    from bwdesign.codegen.export import fill
 
     with pytest.raises(InternalError, match=r"template observer.h.tmpl: no value for \$"):
-        _fill("observer.h.tmpl")
+        fill("observer.h.tmpl")
 
 
 def test_literals_are_exact():

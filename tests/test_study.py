@@ -25,9 +25,10 @@ STAGE = ROOT / "examples" / "firmware_repo" / "stage.toml"
 BOX = "\n[uncertainty]\na1 = { rel = 0.02 }\nalpha = { rel = 0.1 }\n"
 
 
-def test_every_part_has_its_needs_and_the_report_all_but_the_requirements_one():
+def test_every_part_has_its_needs_and_the_report_all_but_the_requirements_ones():
     assert tuple(NEEDS) == PARTS
-    assert set(PARTS) - REPORT_PARTS == {"corner_tracking"}
+    # the requirements' corner tracking and the [baseline] check's analysis
+    assert set(PARTS) - REPORT_PARTS == {"corner_tracking", "baseline"}
 
 
 def test_a_part_not_asked_is_none_and_says_so():

@@ -382,6 +382,7 @@ def _loop(loop: ClosedLoop) -> tuple[_Loop, str]:
     """The certified loop's matrices: ZOH model, discrete observer gain, eq. (12) law."""
     if not isinstance(loop, ClosedLoop):
         raise InputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    loop.require_observer("the robust loop certificate")
     params, obs, ctrl = loop.model, loop.observer, loop.controller
     require_bounded(params)
     if not obs.hysteresis_model:

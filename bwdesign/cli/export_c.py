@@ -2,17 +2,23 @@
 
 Exit codes: 0 written; 1 nothing certifies the gains (nothing written unless
 ``--allow-uncertified``); 2 bad input with one ``error:`` line, nothing written.
+
+``--controller pi|pid|pi-piff`` exports a baseline instead (no observer,
+:mod:`bwdesign.codegen.baselines`): with the stage's ``[baseline]`` gains when its kind
+is the one asked, else tuned by the phase-margin rule; exit 1 (files written) when its
+nominal linear loop is not stable.
 """
 
 from __future__ import annotations
 
 import argparse
 
+from ..codegen.baselines import export_baseline_c
 from ..codegen.export import OBSERVERS, export_c
 from ..codegen.literals import PRECISIONS
-from ..model.config import load_config
+from ..model.config import BASELINE_KINDS, load_config
 from ..output.jsonenc import dump_json
-from .args import EXIT_OK
+from .args import EXIT_NO, EXIT_OK, UsageError
 
 __all__ = ["export_c_args", "run_export_c"]
 
@@ -30,6 +36,14 @@ def export_c_args(p: argparse.ArgumentParser) -> None:
         "eso and phdo, the disturbance hysteresis observer); default phso",
     )
     p.add_argument("--prefix", default="bw", metavar="NAME", help="C name prefix (default bw)")
+    p.add_argument(
+        "--controller",
+        choices=("eq12", *BASELINE_KINDS),
+        default="eq12",
+        help="eq12 (default): the observers and eq. (12); pi, pid, pi-piff: that baseline "
+        "(no observer; [baseline] gains when its kind matches, else the tuning rule); "
+        "pi-bwff is not exported",
+    )
     src = p.add_mutually_exclusive_group()
     src.add_argument(
         "--synthesize",
@@ -56,7 +70,41 @@ def export_c_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
 
 
+def _run_baseline(args: argparse.Namespace) -> int:
+    given = [o for o, v in (("--synthesize", args.synthesize), ("--tuning", args.tuning)) if v]
+    given += ["--allow-uncertified"] if args.allow_uncertified else []
+    if given:
+        raise UsageError(
+            f"--controller {args.controller} exports a baseline (no observer, no certificate): "
+            f"drop {', '.join(given)}"
+        )
+    config = load_config(args.config)
+    spec = config.baseline if config.baseline and config.baseline["kind"] == args.controller else {}
+    res = export_baseline_c(
+        config,
+        args.out,
+        args.controller,
+        precision=args.precision,
+        prefix=args.prefix,
+        gains=spec.get("gains"),
+        phase_margin=spec.get("phase_margin", 60.0),
+        delay=spec.get("delay", False),
+        allow_unbounded=args.allow_unbounded,
+        force=args.force,
+    )
+    if args.json:
+        print(dump_json({"out_dir": str(res.out_dir), "files": list(res.files), **res.document}))
+    else:
+        stable = "stable" if res.certified else "NOT STABLE"
+        print(f"{res.out_dir}: {', '.join(res.files)} ({args.precision}); {args.controller} "
+              f"baseline, nominal linear loop {stable}")  # fmt: skip
+        print(f"  build and check: cc -std=c99 -O2 {res.out_dir}/*.c -lm -o harness")
+    return EXIT_OK if res.certified else EXIT_NO
+
+
 def run_export_c(args: argparse.Namespace) -> int:
+    if args.controller != "eq12":
+        return _run_baseline(args)
     gains_from = "synthesize" if args.synthesize else ("digital" if args.tuning else "config")
     res = export_c(
         load_config(args.config),

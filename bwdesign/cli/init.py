@@ -114,6 +114,12 @@ _SPEC: dict[str, list[tuple[str, str, str | None]]] = {
         ("duration_s", "s: per scenario (default three reference periods, at least 1 s)", None),
         ("distribution", '"uniform" in the box, or "normal" (half-widths as 95 % intervals)', None),
     ],
+    "baseline": [
+        ("kind", '"pi" | "pid" | "pi-bwff" | "pi-piff": the PI/PID baseline checked', None),
+        ("gains", "[kp, ki] ([kp, ki, kd, tf] for a pid); default the tuning rule", None),
+        ("phase_margin", "deg: the tuning rule's phase margin (default 60)", None),
+        ("delay", "true: tuned and analysed with a one-sample delay (default false)", None),
+    ],
     # one source: the requirements schema (bwdesign check, bwdesign.testing)
     "requirements": [(k, meaning, None) for k, (_, meaning) in REQUIREMENT_KEYS.items()]
     + [(k, meaning, None) for k, (_, meaning) in SETTING_KEYS.items()],
@@ -135,6 +141,7 @@ _HEADINGS = {
     "uncertainty": "parameter half-widths: the sweep's box, the requirements' corners (optional)",
     "sweep": "a Monte Carlo sweep over [uncertainty] in the report (optional; needs it)",
     "requirements": "what `bwdesign check` and your CI demand of the stage (optional)",
+    "baseline": "a PI/PID baseline (no observer) the requirement baseline_stable checks (optional)",
 }
 _SECTION_ORDER = (
     "plant",
@@ -146,6 +153,7 @@ _SECTION_ORDER = (
     "synthesis",
     "uncertainty",
     "sweep",
+    "baseline",
     "requirements",
 )
 

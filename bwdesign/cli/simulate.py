@@ -12,6 +12,16 @@ UKF's ``--udot-max``) are the defaults of the options not given; what was
 taken from the file is printed. An option that does not apply to the run is
 an error.
 
+``--controller pi|pid|pi-bwff|pi-piff`` runs a baseline instead of eq. (12) with an
+observer (:mod:`bwdesign.control.baselines`: PI or PID on the measurement, with the
+inverse Bouc–Wen or the Prandtl–Ishlinskii feedforward), tuned by the phase-margin
+rule of :func:`bwdesign.control.baseline_tuning.tune_baseline` (``--phase-margin``)
+or with ``--kp --ki [--kd --tf]``; the observer and eq. (12) options are then
+errors. The baseline's nominal linear loop is analysed first: when it is not stable
+the margins are printed and the exit code is 1 (the run is still reported).
+``--mismatch a1=+2%,alpha=-10%`` simulates the ``--plant`` model with those signed
+parameter changes (relative with ``%``, else absolute): an ``[uncertainty]`` corner.
+
 ``--tuning digital`` runs the loop with :func:`bwdesign.design.digital_tuning`
 chosen for the stage, ``--dt`` and ``--delay`` (observer gains for the chosen
 ``--observer``, eq. (12) discrete form, lambdas, integral action); then
@@ -28,11 +38,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..control.baseline_tuning import BaselineAnalysis, analyze_baseline, make_baseline
+from ..control.baselines import BASELINE_KINDS
 from ..control.controllers import TuningWarning, make_controller
 from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..design.tuning import digital_tuning
 from ..model.config import load_plant
-from ..model.params import BoucWenParams
+from ..model.mismatch import apply_mismatch
+from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference, Sine, Step, Triangle
 from ..observers.spec import N_GAINS, OBSERVER_KINDS, ObserverSpec
 from ..output.files import FileTarget, prepare_file
@@ -62,7 +75,47 @@ def simulate_args(p: argparse.ArgumentParser) -> None:
     add_plant_args(p)
     _reference_args(p)
     _loop_args(p)
+    _baseline_args(p)
     _run_args(p)
+
+
+#: ``--controller`` choices: eq. (12) with an observer, or a baseline.
+CONTROLLERS = ("eq12", *BASELINE_KINDS)
+_BASELINE_OPTIONS = ("kp", "ki", "kd", "tf", "phase_margin")
+_OBSERVER_OPTIONS = (
+    "observer", "gains", "tuning", "udot_max", "lambda1", "lambda2", "integral_rate",
+)  # fmt: skip
+
+
+def _baseline_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--controller",
+        choices=CONTROLLERS,
+        default="eq12",
+        help="eq12 (default): eq. (12) with --observer; pi, pid: a PI or PID on the measured "
+        "output; pi-bwff: PI with the exact inverse Bouc-Wen feedforward; pi-piff: PI with a "
+        "Prandtl-Ishlinskii compensator fitted to the model's quasi-static loops",
+    )
+    p.add_argument("--kp", type=finite_float, default=None, help="baseline: proportional gain")
+    p.add_argument("--ki", type=finite_float, default=None, help="baseline: integral gain (1/s)")
+    p.add_argument("--kd", type=finite_float, default=None, help="pid: derivative gain (s)")
+    p.add_argument(
+        "--tf", type=finite_float, default=None, help="pid: derivative filter time constant (s)"
+    )
+    p.add_argument(
+        "--phase-margin",
+        type=positive_float,
+        default=None,
+        metavar="DEG",
+        help="baseline: the tuning rule's phase margin (deg, default 60; no --kp/--ki)",
+    )
+    p.add_argument(
+        "--mismatch",
+        default=None,
+        metavar="NAME=CHANGE,...",
+        help="simulate the --plant model with these parameter changes (a1=+2%%: relative, "
+        "alpha=-0.01: absolute), e.g. an [uncertainty] corner; not with --true-plant",
+    )
 
 
 def _reference_args(p: argparse.ArgumentParser) -> None:
@@ -113,7 +166,7 @@ def _loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--observer",
         choices=OBSERVER_KINDS,
-        default="phso",
+        default=None,
         help="observer (default phso; phdo: the hysteresis observer with a disturbance state)",
     )
     p.add_argument(
@@ -271,6 +324,7 @@ class SimulateRequest:
     json: bool
     tuning: dict | None
     options: dict  # the resolved options, for the printed summary
+    analysis: BaselineAnalysis | None = None  # a baseline's nominal linear loop
 
 
 def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
@@ -284,7 +338,17 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
     args = resolved_copy(namespace)  # resolved here; the caller's is untouched
     stage = load_stage(args.plant)
     params = stage.params
+    if args.true_plant and args.mismatch:
+        raise UsageError("give --true-plant or --mismatch, not both")
     true_params = load_plant(args.true_plant) if args.true_plant else None
+    if args.mismatch:
+        true_params = apply_mismatch(args.mismatch, params, name="--mismatch")
+    if args.controller != "eq12":
+        return _baseline_request(args, stage, true_params)
+    given = [f"--{o.replace('_', '-')}" for o in _BASELINE_OPTIONS if getattr(args, o) is not None]
+    if given:
+        raise UsageError(f"{', '.join(given)} apply to a baseline --controller only")
+    args.observer = args.observer or "phso"
     if args.tuning is not None:
         given = [
             f"--{o.replace('_', '-')}"
@@ -325,13 +389,7 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
                 f"--{opt.replace('_', '-')} is required"
                 + ("" if opt == "duration" else " (or a --plant FILE.toml that sets it)")
             )
-    n = args.duration / args.dt
-    if n < 2:
-        raise UsageError(f"--duration {args.duration:g} s holds fewer than 2 samples of --dt")
-    if n > MAX_SAMPLES:
-        raise UsageError(
-            f"--duration/--dt = {n:.3g} samples exceeds the limit of {MAX_SAMPLES:.0e}"
-        )
+    _check_samples(args.duration, args.dt)
     if (args.u_min is None) != (args.u_max is None) and not _limits_from_file(stage):
         raise UsageError("give both --u-min and --u-max, or neither")
     u_limits = _u_limits(args.u_min, args.u_max)
@@ -368,6 +426,87 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
     )
 
 
+def _baseline_request(args: argparse.Namespace, stage: Stage, true_params) -> SimulateRequest:
+    """:func:`simulate_request` for ``--controller`` a baseline (no observer)."""
+    given = [
+        f"--{o.replace('_', '-')}" for o in _OBSERVER_OPTIONS if getattr(args, o) is not None
+    ] + (["--form"] if args.form != "continuous" else [])
+    if given:
+        raise UsageError(
+            f"--controller {args.controller} has no observer and no eq. (12) law: drop "
+            + ", ".join(given)
+        )
+    explicit = [o for o in ("kp", "ki", "kd", "tf") if getattr(args, o) is not None]
+    pid = args.controller == "pid"
+    if explicit and args.phase_margin is not None:
+        raise UsageError("give the gains (--kp, --ki) or --phase-margin (the rule), not both")
+    want = ["kp", "ki", "kd", "tf"] if pid else ["kp", "ki"]
+    if explicit and sorted(explicit) != sorted(want):
+        raise UsageError(
+            f"--controller {args.controller} with explicit gains needs "
+            + ", ".join(f"--{o}" for o in want)
+            + f" (got {', '.join('--' + o for o in explicit)})"
+        )
+    cfg = stage.config
+    if cfg is not None:
+        args.dt = stage.default(args, "dt", "[sampling]", cfg.dt)
+        ctl = cfg.controller
+        if ctl is not None and args.u_min is None and args.u_max is None:
+            args.u_min = stage.default(args, "u_min", "[controller]", ctl.u_min)
+            args.u_max = stage.default(args, "u_max", "[controller]", ctl.u_max)
+    reference = _reference(args, stage)
+    if args.dt is None:
+        raise UsageError("--dt is required (or a --plant FILE.toml that sets it)")
+    _check_samples(args.duration, args.dt)
+    if (args.u_min is None) != (args.u_max is None) and not _limits_from_file(stage):
+        raise UsageError("give both --u-min and --u-max, or neither")
+    params = stage.params
+    controller = make_baseline(
+        params,
+        args.dt,
+        args.controller,
+        reference=reference,
+        gains=[getattr(args, o) for o in want] if explicit else None,
+        phase_margin=60.0 if args.phase_margin is None else args.phase_margin,
+        delay=args.delay,
+        u_limits=_u_limits(args.u_min, args.u_max),
+        allow_unbounded=args.allow_unbounded,
+    )
+    loop = ClosedLoop(
+        params,
+        None,
+        controller,
+        dt=args.dt,
+        delay=args.delay,
+        start=ON_REFERENCE if args.start_on_reference else Start(),
+        allow_unbounded=args.allow_unbounded,
+    )
+    return SimulateRequest(
+        stage=stage,
+        loop=loop,
+        reference=reference,
+        duration=args.duration,
+        true_params=true_params,
+        noise_std=args.noise_std,
+        seed=args.seed,
+        csv=args.csv,
+        json=bool(args.json),
+        tuning=controller.tuning,
+        options=dict(vars(args)),
+        analysis=analyze_baseline(controller, params, delay=args.delay),
+    )
+
+
+def _check_samples(duration: float, dt: float) -> None:
+    n = duration / dt
+    if n < 2:
+        raise UsageError(f"--duration {duration:g} s holds fewer than 2 samples of --dt")
+    if n > MAX_SAMPLES:
+        raise UsageError(
+            f"--duration/--dt = {n:.3g} samples exceeds the limit of {MAX_SAMPLES:.0e}"
+        )
+
+
 def run_simulate(args: argparse.Namespace) -> int:
     """Run ``bwdesign simulate``; returns the exit code."""
     req = simulate_request(args)
@@ -389,7 +528,11 @@ def run_simulate(args: argparse.Namespace) -> int:
     doc["plant"] = params.to_dict()
     doc["reference"] = reference.to_dict()
     doc["observer"] = o["observer"]
+    doc["controller"] = o["controller"]
     doc["tuning"] = req.tuning
+    if req.analysis is not None:
+        doc["nominal_loop"] = req.analysis.to_dict()
+        doc["nominal_loop_text"] = req.analysis.describe()
     doc["csv"] = str(target.path) if target else None
     doc["start"] = "on reference" if o["start_on_reference"] else "rest"
     doc["defaults_from_file"] = stage.to_dict()
@@ -398,8 +541,9 @@ def run_simulate(args: argparse.Namespace) -> int:
     else:
         if stage.note() is not None:
             print(stage.note())
-        _print(result, params, reference.describe(), argparse.Namespace(**o))
-    return EXIT_OK if result.stable else EXIT_NO
+        _print(result, params, reference.describe(), argparse.Namespace(**o), req.analysis)
+    ok = result.stable and (req.analysis is None or req.analysis.stable)
+    return EXIT_OK if ok else EXIT_NO
 
 
 def _file_defaults(args: argparse.Namespace, stage: Stage) -> None:
@@ -467,26 +611,51 @@ def _u_limits(lo: float | None, hi: float | None) -> tuple[float, float] | None:
     return (-math.inf if lo is None else lo, math.inf if hi is None else hi)
 
 
-def _print(result: SimulationResult, params, ref_text: str, args: argparse.Namespace) -> None:
+def _loop_line(args: argparse.Namespace, s: dict) -> str:
+    if args.controller == "eq12":
+        return (
+            f"loop: {args.observer.upper()} observer, eq. (12) {s['controller']['form']} form, "
+            f"lambda1 = {args.lambda1:g}, lambda2 = {args.lambda2:g} 1/s, dt = {args.dt:g} s"
+        )
+    c = s["controller"]
+    gains = f"kp = {c['kp']:.6g}, ki = {c['ki']:.6g}" + (
+        f", kd = {c['kd']:.6g}, tf = {c['tf']:.6g}" if c["kd"] else ""
+    )
+    how = c["tuning"]["rule"] if c["tuning"] else "explicit gains"
+    return (
+        f"loop: {args.controller} baseline on the measured output, no observer, {gains} "
+        f"({how}), dt = {args.dt:g} s"
+    )
+
+
+def _print(
+    result: SimulationResult,
+    params,
+    ref_text: str,
+    args: argparse.Namespace,
+    analysis: BaselineAnalysis | None = None,
+) -> None:
     lu, iu = params.length_unit, params.input_unit
     s = result.settings
     print(
         f"plant: {s['plant'] or '(unnamed)'}" + (" (true plant differs)" if s["true_plant"] else "")
     )
     print(f"reference: {ref_text}")
-    print(
-        f"loop: {args.observer.upper()} observer, eq. (12) {s['controller']['form']} form, "
-        f"lambda1 = {args.lambda1:g}, lambda2 = {args.lambda2:g} 1/s, dt = {args.dt:g} s"
-        + (", one-sample delay" if args.delay else "")
-    )
+    print(_loop_line(args, s) + (", one-sample delay" if args.delay else ""))
+    if analysis is not None:
+        print(f"nominal linear loop: {analysis.describe()}")
     if args.start_on_reference:
         x0 = ", ".join(f"{v:.6g}" for v in s["x0"])
         print(
-            f"start: on the reference, x0 = xhat0 = ({x0}), u held before t = 0: "
+            f"start: on the reference, {'x0' if s['observer'] is None else 'x0 = xhat0'} = "
+            f"({x0}), u held before t = 0: "
             f"{s['u_prev']:.6g} {iu}"
         )
     else:
         print(f"start: from rest, x0 = xhat0 = (0, 0, 0), u = 0 {iu} before t = 0")
+    if s.get("true_plant"):
+        tp = ", ".join(f"{k} = {s['true_plant'][k]:.9g}" for k in MODEL_FIELDS)
+        print(f"true plant: {tp}")
     if result.settings.get("u_limits"):
         lo, hi = result.settings["u_limits"]
         print(f"input limits: {lo:g} .. {hi:g} {iu}")
@@ -501,7 +670,8 @@ def _print(result: SimulationResult, params, ref_text: str, args: argparse.Names
     print(f"  MAXE = {m.maxe:.6g} {lu}")
     print(f"  ME   = {m.me:.6g} {lu}")
     print(f"  RMSE = {m.rmse:.6g} {lu}")
-    e1, e2, e3 = result.estimation_rmse
-    print(f"estimation RMSE: x1 {e1:.4g} {lu}, x2 {e2:.4g} {lu}/s, x3 {e3:.4g} {lu}")
+    if result.estimation_rmse is not None:
+        e1, e2, e3 = result.estimation_rmse
+        print(f"estimation RMSE: x1 {e1:.4g} {lu}, x2 {e2:.4g} {lu}/s, x3 {e3:.4g} {lu}")
     if s.get("u_limits"):
         print(f"input saturated {100 * result.saturated_fraction:.3g} % of the time")

@@ -81,7 +81,8 @@ def sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--observers",
         default="phso,eso",
-        help="observers to run: phso, eso, phdo (default phso,eso)",
+        help="observers to run: phso, eso, phdo, or the baselines pi, pid, pi-bwff, pi-piff "
+        "(no observer; tuned by the phase-margin rule) (default phso,eso)",
     )
     p.add_argument(
         "--tuning",

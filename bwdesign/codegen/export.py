@@ -68,7 +68,7 @@ from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from .literals import CTypes
 
-__all__ = ["OBSERVERS", "CExport", "export_c", "c_sources"]
+__all__ = ["OBSERVERS", "CExport", "export_c", "c_sources", "fill", "check_prefix"]
 
 #: The sampled observers the C library carries, by the name ``--observer`` takes.
 OBSERVERS: dict[str, tuple[type[SampledObserver], str]] = {
@@ -113,14 +113,14 @@ def _template(name: str) -> Template:
     return Template(files("bwdesign.codegen").joinpath("templates", name).read_text())
 
 
-def _fill(name: str, **values: Any) -> str:
+def fill(name: str, **values: Any) -> str:
     try:
         return _template(name).substitute(values)
     except KeyError as err:  # a template asks for a value the exporter does not give
         raise InternalError(f"template {name}: no value for ${err.args[0]}") from None
 
 
-def _check_prefix(prefix: str) -> str:
+def check_prefix(prefix: str) -> str:
     if not isinstance(prefix, str) or not _PREFIX.fullmatch(prefix):
         raise InputError(f"prefix must be a C identifier of at most 31 characters, got {prefix!r}")
     return prefix
@@ -369,7 +369,7 @@ def c_sources(
         The content of ``export.json``.
     """
     ct = CTypes(precision)
-    prefix = _check_prefix(prefix)
+    prefix = check_prefix(prefix)
     if observer not in OBSERVERS:
         raise InputError(f"unknown observer {observer!r}; choose one of {', '.join(OBSERVERS)}")
     if gains_from not in GAIN_SOURCES:
@@ -429,7 +429,7 @@ def c_sources(
         observers="".join(impl),
     )
     init_dispatch, step_dispatch = _harness_dispatch(prefix, list(_THREE_STATE))
-    harness = _fill(
+    harness = fill(
         "harness.c.tmpl",
         **base,
         default_observer=observer,
@@ -453,8 +453,8 @@ def c_sources(
         },
     }
     out = {
-        f"{prefix}.h": _fill("header.h.tmpl", **header_vals),
-        f"{prefix}.c": _fill("source.c.tmpl", **source_vals),
+        f"{prefix}.h": fill("header.h.tmpl", **header_vals),
+        f"{prefix}.c": fill("source.c.tmpl", **source_vals),
         "harness.c": harness,
         "export.json": dump_json(document) + "\n",
     }
@@ -512,14 +512,14 @@ def _observer_code(
         cls, title = OBSERVERS[name]
         k1, k2, k3 = Ks[name]
         vals = dict(base, obs=name, OBS=name.upper(), title=title)
-        proto.append(_fill("observer.h.tmpl", **vals))
+        proto.append(fill("observer.h.tmpl", **vals))
         x3_next = "hysteresis(s->x[2], s->u_prev, u)" if cls._hysteresis else "s->x[2]"
         impl.append(
-            _fill("observer.c.tmpl", **vals, k1=lit(k1), k2=lit(k2), k3=lit(k3), x3_next=x3_next)
+            fill("observer.c.tmpl", **vals, k1=lit(k1), k2=lit(k2), k3=lit(k3), x3_next=x3_next)
         )
     zoh_step = _zoh_step(ct, zoh)
     impl.append(
-        _fill(
+        fill(
             "phdo.c.tmpl",
             **base,
             title=OBSERVERS["phdo"][1],

@@ -11,6 +11,13 @@ the simulation, not part of the loop.
 A stage file builds its loops in one place, :meth:`ClosedLoop.from_config`: the
 ``[controller]`` law (eq. 12) or a digital tuning's, the ``[observer]`` gains or the
 tuning's, the ``[controller]`` input limits, the ``[sampling]`` dt.
+
+A loop with a baseline controller (:class:`~bwdesign.control.baselines.BaselineController`:
+PI or PID on the measured output, with or without a hysteresis feedforward) has no
+observer: ``observer=None``, stated, not faked (:attr:`ClosedLoop.baseline`). Its stage
+loop is :meth:`ClosedLoop.baseline_from_config`. What needs an estimate (the continuous
+simulation, the loop analysis of eq. 12, the certificates) refuses it through
+:meth:`ClosedLoop.require_observer`.
 """
 
 from __future__ import annotations
@@ -30,6 +37,8 @@ from ..model.references import Reference
 from ..observers.gains import check_disturbance_gains, check_gains
 from ..observers.spec import ObserverSpec
 from ..validate import SIGNAL, Range, real
+from .baseline_tuning import make_baseline
+from .baselines import BaselineController
 from .controllers import TrackingController, TuningWarning, make_controller
 
 __all__ = ["ClosedLoop", "Start", "ON_REFERENCE", "DIVERGENCE_LIMIT", "controller_from_config"]
@@ -106,10 +115,12 @@ class ClosedLoop:
     model : BoucWenParams
         The model the observer and the law are built on (the simulated plant is an
         argument of a simulation: ``true_params``).
-    observer : ObserverSpec
-    controller : TrackingController
+    observer : ObserverSpec or None
+        ``None`` exactly when ``controller`` is a baseline (it has no observer).
+    controller : TrackingController or BaselineController
         Continuous eq. (12) or its discrete form; its ``u_limits``, ``estimate_limits``,
-        ``hysteresis_jump`` and integral action apply. A simulation runs a copy.
+        ``hysteresis_jump`` and integral action apply. A simulation runs a copy. Or a
+        baseline (PI/PID on the measurement, built for ``dt``).
     dt : float or None
         Sample time (s); ``None`` for a loop only simulated in continuous time.
     delay : bool
@@ -134,8 +145,8 @@ class ClosedLoop:
     """
 
     model: BoucWenParams
-    observer: ObserverSpec
-    controller: TrackingController
+    observer: ObserverSpec | None
+    controller: TrackingController | BaselineController
     dt: float | None = None
     delay: bool = False
     compensate_delay: bool = True
@@ -147,6 +158,38 @@ class ClosedLoop:
         if not isinstance(self.model, BoucWenParams):
             raise InputError(f"model must be a BoucWenParams, got {type(self.model).__name__}")
         require_bounded(self.model, self.allow_unbounded)
+        if isinstance(self.controller, BaselineController):
+            self._check_baseline()
+        else:
+            self._check_observer_loop()
+        if not (isinstance(self.start, Start) or self.start == ON_REFERENCE):
+            raise InputError(f"start must be a Start or {ON_REFERENCE!r}, got {self.start!r}")
+        limit = real(self.divergence_limit, "divergence_limit", within=_POSITIVE)
+        object.__setattr__(self, "divergence_limit", limit)
+        for flag in ("delay", "compensate_delay", "allow_unbounded"):
+            object.__setattr__(self, flag, bool(getattr(self, flag)))
+
+    def _check_baseline(self) -> None:
+        if self.observer is not None:
+            raise InputError(
+                "a baseline controller (PI/PID on the measurement) runs without an observer: "
+                f"give observer=None, got {self.observer!r}"
+            )
+        if self.dt is None:
+            raise InputError("a baseline controller runs sampled: give the loop's dt")
+        object.__setattr__(self, "dt", check_sample_time(self.model, self.dt))
+        if self.controller.dt != self.dt:
+            raise InputError(
+                f"the baseline controller was built for dt = {self.controller.dt:g} s, not "
+                f"{self.dt} s"
+            )
+
+    def _check_observer_loop(self) -> None:
+        if self.observer is None:
+            raise InputError(
+                "observer=None is for a baseline controller; the eq. (12) law needs an "
+                "observer (ObserverSpec.of(kind, gains))"
+            )
         if not isinstance(self.observer, ObserverSpec):
             raise InputError(
                 f"observer must be an ObserverSpec (ObserverSpec.of(kind, gains)), got "
@@ -179,12 +222,19 @@ class ClosedLoop:
                 "law would need the jump of x3 with d added; use the PHSO or a law without "
                 "the jump"
             )
-        if not (isinstance(self.start, Start) or self.start == ON_REFERENCE):
-            raise InputError(f"start must be a Start or {ON_REFERENCE!r}, got {self.start!r}")
-        limit = real(self.divergence_limit, "divergence_limit", within=_POSITIVE)
-        object.__setattr__(self, "divergence_limit", limit)
-        for flag in ("delay", "compensate_delay", "allow_unbounded"):
-            object.__setattr__(self, flag, bool(getattr(self, flag)))
+
+    @property
+    def baseline(self) -> bool:
+        """The loop runs a baseline controller (and no observer)."""
+        return isinstance(self.controller, BaselineController)
+
+    def require_observer(self, what: str) -> None:
+        """Raise :class:`InputError` naming ``what`` when the loop is a baseline."""
+        if self.baseline:
+            raise InputError(
+                f"{what} needs an observer-based loop; the {self.controller.kind} baseline has "
+                "no observer (simulate it with bwdesign.simulate or simulate_batch)"
+            )
 
     # -- building ----------------------------------------------------------------
 
@@ -244,6 +294,53 @@ class ClosedLoop:
             allow_unbounded=allow_unbounded,
         )
 
+    @classmethod
+    def baseline_from_config(
+        cls,
+        config: Any,
+        kind: str,
+        *,
+        gains: Any = None,
+        phase_margin: float = 60.0,
+        delay: bool = False,
+        start: Start | str = ON_REFERENCE,
+        saturate: bool = True,
+        allow_unbounded: bool = False,
+    ) -> ClosedLoop:
+        """The stage's loop with the baseline ``kind`` (``"pi"``, ``"pid"``, ``"pi-bwff"``,
+        ``"pi-piff"``) and no observer.
+
+        Tuned on ``[plant]`` by :func:`~bwdesign.control.baseline_tuning.tune_baseline`
+        (``phase_margin``, for the ``delay``) unless ``gains`` are given; the
+        ``[controller]`` input limits apply unless ``saturate=False``; the Prandtl–Ishlinskii
+        operator is fitted over the ``[reference]``'s range.
+        """
+        where = config.source or "config"
+        if config.dt is None:
+            raise ConfigError(f"{where}: the loop needs [sampling] dt")
+        ctl = config.controller
+        limits = ctl.input_limits() if ctl is not None and saturate else None
+        controller = make_baseline(
+            config.plant,
+            float(config.dt),
+            kind,
+            reference=config.reference,
+            gains=gains,
+            phase_margin=phase_margin,
+            delay=delay,
+            u_limits=limits,
+            allow_unbounded=allow_unbounded,
+        )
+        return cls(
+            model=config.plant,
+            observer=None,
+            controller=controller,
+            dt=float(config.dt),
+            delay=delay,
+            start=start,
+            allow_unbounded=allow_unbounded,
+        )
+
     def replace(self, **changes: Any) -> ClosedLoop:
         """A copy with ``changes`` (validated again)."""
         return dataclasses.replace(self, **changes)
@@ -265,7 +362,7 @@ class ClosedLoop:
     def to_dict(self) -> dict[str, Any]:
         return {
             "model": self.model.name,
-            "observer": self.observer.to_dict(),
+            "observer": None if self.observer is None else self.observer.to_dict(),
             "controller": self.controller.to_dict(),
             "dt": self.dt,
             "delay": self.delay,

@@ -288,6 +288,7 @@ def loop_parts(
     """
     if not isinstance(loop, ClosedLoop):
         raise InputError(f"loop must be a ClosedLoop, got {type(loop).__name__}")
+    loop.require_observer("the eq. (12) loop analysis (analyze_baseline analyses a baseline)")
     if estimator not in ("observer", "state"):
         raise InputError(f"estimator must be 'observer' or 'state', got {estimator!r}")
     if estimator == "observer" and loop.observer.kind not in ("phso", "eso"):

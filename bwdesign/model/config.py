@@ -54,7 +54,18 @@ from .requirements import parse_requirements
 from .stage_presets import resolve_config, stage_presets, unknown_plant_message
 from .uncertainty import DisturbanceBound, UncertaintyBox
 
-__all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant", "parse_toml"]
+__all__ = [
+    "StageConfig",
+    "ControllerSettings",
+    "load_config",
+    "load_plant",
+    "parse_toml",
+    "BASELINE_KINDS",
+]
+
+#: The baseline controllers (:mod:`bwdesign.control.baselines`), by their names in
+#: ``[baseline] kind`` and ``bwdesign simulate --controller``.
+BASELINE_KINDS = ("pi", "pid", "pi-bwff", "pi-piff")
 
 _SECTIONS = {
     "plant": None,
@@ -75,6 +86,7 @@ _SECTIONS = {
     },
     "requirements": None,  # checked by model.requirements
     "uncertainty": None,  # checked by UncertaintyBox.from_dict
+    "baseline": {"kind", "gains", "phase_margin", "delay"},
 }
 
 
@@ -125,6 +137,9 @@ class StageConfig:
         The ``[requirements]`` a user's CI checks (:mod:`bwdesign.model.requirements`).
     sweep : dict or None
         The ``[sweep]`` the report runs over ``[uncertainty]`` (off when absent).
+    baseline : dict or None
+        ``[baseline]``: a baseline controller the stage's checks hold to
+        (``kind``; ``gains`` or the tuning rule's ``phase_margin``; ``delay``).
     uncertainty : UncertaintyBox or None
         The ``[uncertainty]`` section (None when absent or when it lists no parameter).
     disturbance : DisturbanceBound or None
@@ -147,6 +162,7 @@ class StageConfig:
     uncertainty: UncertaintyBox | None = None
     disturbance: DisturbanceBound | None = None
     sweep: dict[str, Any] | None = None
+    baseline: dict[str, Any] | None = None
     source: str = ""
     sha256: str = ""
 
@@ -218,10 +234,11 @@ def _sweep(table: Any) -> dict[str, Any] | None:
             out[key] = t[key]
     if "observers" in t:
         obs = t["observers"]
-        allowed = ("phso", "eso", "phdo")
+        allowed = ("phso", "eso", "phdo", *BASELINE_KINDS)
         if not isinstance(obs, list) or not obs or any(o not in allowed for o in obs):
             raise ConfigError(
-                f'[sweep] observers must be a list of "phso", "eso", "phdo", got {obs!r}'
+                f"[sweep] observers must be a list of {', '.join(map(repr, allowed))} (the "
+                f"last {len(BASELINE_KINDS)}: baselines, no observer), got {obs!r}"
             )
         twice = sorted({o for o in obs if obs.count(o) > 1})
         if twice:
@@ -233,6 +250,36 @@ def _sweep(table: Any) -> dict[str, Any] | None:
     for key, within in (("noise_std_um", NONNEGATIVE), ("duration_s", POSITIVE)):
         if key in t:
             out[key] = _num(t[key], f"[sweep] {key}", within=within)
+    return out
+
+
+def _baseline(table: Any) -> dict[str, Any] | None:
+    """``[baseline]``: ``kind``, ``gains`` (2 for a PI, 4 for a PID) or ``phase_margin``."""
+    t = _check_keys(table, "baseline", _SECTIONS["baseline"])
+    if not t:  # an empty section asks for nothing, as for [sweep]
+        return None
+    kind = t.get("kind")
+    if kind not in BASELINE_KINDS:
+        raise ConfigError(f"[baseline] kind must be one of {BASELINE_KINDS}, got {kind!r}")
+    out: dict[str, Any] = {"kind": kind, "gains": None, "phase_margin": 60.0, "delay": False}
+    if "gains" in t and "phase_margin" in t:
+        raise ConfigError("[baseline]: give gains or phase_margin (the tuning rule), not both")
+    if "gains" in t:
+        g, n = t["gains"], 4 if kind == "pid" else 2
+        if not isinstance(g, list) or len(g) != n:
+            want = "[kp, ki, kd, tf]" if n == 4 else "[kp, ki]"
+            raise ConfigError(f"[baseline] gains of a {kind} must be {want}, got {g!r}")
+        out["gains"] = tuple(
+            _num(v, f"[baseline] gains[{i}]", within=GAIN) for i, v in enumerate(g)
+        )
+    if "phase_margin" in t:
+        out["phase_margin"] = _num(
+            t["phase_margin"], "[baseline] phase_margin (deg)", positive=True
+        )
+    if "delay" in t:
+        if not isinstance(t["delay"], bool):
+            raise ConfigError(f"[baseline] delay must be true or false, got {t['delay']!r}")
+        out["delay"] = t["delay"]
     return out
 
 
@@ -348,6 +395,7 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         uncertainty=uncertainty,
         disturbance=disturbance,
         sweep=sweep,
+        baseline=_baseline(data["baseline"]) if "baseline" in data else None,
         source=source,
         sha256=sha256,
     )

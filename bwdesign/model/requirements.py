@@ -9,6 +9,7 @@
     max_maxe_um = 80.0           #   and max |e|, worst over the [uncertainty] corners when present
     min_gain_margin_db = 6.0     # the sampled tracking loop (observer + eq. 12 at dt)
     min_phase_margin_deg = 30.0
+    baseline_stable = true       # the [baseline] PI/PID's nominal loop (needs [baseline])
     # how the tracking is simulated (optional)
     observer = "phso"            # "phso" | "eso"
     noise_std_um = 0.0           # sensor noise std, seeded
@@ -36,6 +37,7 @@ REQUIREMENT_KEYS: dict[str, tuple[type, str]] = {
     "max_maxe_um": (float, "simulated tracking MAXE <= value (um)"),
     "min_gain_margin_db": (float, "gain margin of the sampled loop >= value (dB)"),
     "min_phase_margin_deg": (float, "phase margin of the sampled loop >= value (deg)"),
+    "baseline_stable": (bool, "the [baseline] controller's sampled nominal loop is stable"),
 }
 #: Settings of the tracking simulation the requirements use.
 SETTING_KEYS: dict[str, tuple[type, str]] = {

@@ -31,6 +31,7 @@ from ..output.jsonenc import dump_json
 from ..output.text import gains_text, limits_text
 from ..study import REPORT_PARTS, Study, study
 from ..study.cache import StudyCache
+from .baselines import baselines_section
 from .document import Document, fmt
 from .figures import FigureWriter, as_writer, keep_figures, kept_figures
 from .robust import robust_section
@@ -408,6 +409,7 @@ def render(
     _error_dynamics_section(doc, study, figs, plotting)
     _loop_section(doc, study, figs, plotting)
     tracking_section(doc, study, figs)
+    baselines_section(doc, study)
     if study.sweep is not None:
         sweep_section(doc, study, figs)
     if study.robust is not None:

@@ -106,8 +106,9 @@ def sweep_document(
         f"{spec.noise_std:g} {lu} (seeded per scenario), "
         f"{'one-sample delay, ' if spec.delay else ''}"
         f"controller {spec.controller.to_dict()['form']} "
-        f"(lambda1 = {spec.controller.lambda1:g}, lambda2 = {spec.controller.lambda2:g}). "
-        "Metrics over the last two reference periods. Rows: scenarios.parquet."
+        f"(lambda1 = {spec.controller.lambda1:g}, lambda2 = {spec.controller.lambda2:g})"
+        + _baselines_text(spec)
+        + ". Metrics over the last two reference periods. Rows: scenarios.parquet."
     )
     doc.heading("Uncertainty box")
     rows = [
@@ -161,6 +162,22 @@ def sweep_document(
         "this configuration yet, so the sweep's worst case is not compared with one."
     )
     return doc, summary
+
+
+def _baselines_text(spec: Any) -> str:
+    """What the baseline rows run (they have no observer and not the eq. (12) law)."""
+    rows = []
+    for name in spec.observers:
+        c = spec.loop_for(name).controller
+        if getattr(c, "form", None) == "baseline":
+            gains = f"kp = {c.kp:.4g}, ki = {c.ki:.4g}" + (f", kd = {c.kd:.4g}" if c.kd else "")
+            rows.append(f"{name.upper()} {gains}")
+    if not rows:
+        return ""
+    return (
+        "; baselines (no observer, tuned by the phase-margin rule of "
+        "bwdesign.control.baseline_tuning): " + "; ".join(rows)
+    )
 
 
 def _metrics_text(m: Mapping[str, float] | None, lu: str, iu: str) -> str:

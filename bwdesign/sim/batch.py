@@ -12,7 +12,8 @@ rounding (the tests ask for 1e-9 relative); the noise of scenario ``i`` is
 :func:`simulate` draws it, generated in blocks of time steps.
 
 Not batched (use :func:`simulate`): the UKF, observer objects or factories, and
-controllers with ``hysteresis_jump``.
+controllers with ``hysteresis_jump``. Baseline loops (no observer) are batched on
+:func:`~bwdesign.sim.kernel.advance_baseline`; their estimation statistics are NaN.
 
 Only what a sweep needs is kept per scenario: the steady-state window's
 statistics (MAXE, ME, RMSE, estimation RMSE and max error per state), stability
@@ -28,16 +29,21 @@ from typing import Any
 
 import numpy as np
 
+from ..control.baselines import PIDState
 from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.references import Reference
 from ..observers.spec import GAIN_KINDS
+from .closed_loop import baseline_feedforward
 from .kernel import (
     ARRAY,
+    BaselineConstants,
+    BaselineState,
     LoopConstants,
     LoopState,
     advance,
+    advance_baseline,
     correct,
     discrete_observer_gains,
     hysteresis_increment_batch,
@@ -191,7 +197,7 @@ def simulate_batch(
         true_params = list(true_params) if true_params is not None else None
     run = prepare(loop, reference, duration=duration, true_params=true_params or [])
     loop = run.loop
-    if loop.observer.kind not in BATCH_OBSERVERS:
+    if not loop.baseline and loop.observer.kind not in BATCH_OBSERVERS:
         raise InputError(
             f"batched observers are {', '.join(BATCH_OBSERVERS)}, got {loop.observer.kind!r}"
         )
@@ -208,14 +214,16 @@ def simulate_batch(
     if not np.any(in_win):
         raise InputError(f"window {win} holds no sample")
     dist = disturbance_samples(input_disturbance, run, N)
-    acc = _run_batch(run, in_win, noise_std, seeds, dist)
+    acc = (_run_batch_baseline if loop.baseline else _run_batch)(
+        run, in_win, noise_std, seeds, dist
+    )
     stable = acc["alive"].copy()
     count = acc["count"]
     settings = {
         "plant": loop.model.name,
         "reference": reference.to_dict(),
-        "observer": loop.observer.kind,
-        "gains": list(loop.observer.gains),
+        "observer": None if loop.baseline else loop.observer.kind,
+        "gains": None if loop.baseline else list(loop.observer.gains),
         "controller": loop.controller.to_dict(),
         "dt": loop.dt,
         "duration": run.n * loop.dt,
@@ -240,6 +248,62 @@ def simulate_batch(
         samples=run.n,
         settings=settings,
     )
+
+
+def _noise_blocks(gens, noise_std: np.ndarray, n: int):
+    """Each scenario's noise, ``_NOISE_BLOCK`` time steps at a time: yields ``(k, column)``."""
+    N = noise_std.size
+    noisy = np.flatnonzero(noise_std > 0)
+    for k0 in range(0, n, _NOISE_BLOCK):
+        block = min(_NOISE_BLOCK, n - k0)
+        noise = np.zeros((N, block))
+        for i in noisy:
+            noise[i] = noise_std[i] * gens[i].standard_normal(block)
+        for j in range(block):
+            yield k0 + j, noise[:, j]
+
+
+def _run_batch_baseline(run: Run, in_win: np.ndarray, noise_std, seeds, dist) -> dict:
+    """A baseline loop for every scenario at once (:func:`.kernel.advance_baseline`)."""
+    loop, n, N = run.loop, run.n, len(run.true_params)
+    dt, limit = loop.dt, loop.divergence_limit
+    ref = run.reference_terms()
+    xd_l = ref[0].tolist()
+    ff = baseline_feedforward(run)
+    c = BaselineConstants(loop, ff, ref, ARRAY)
+    T = _true_matrices(list(run.true_params), dt)
+    c.set_plants(T)
+    c.dist = dist
+    start = run.start
+    q0 = loop.controller.start(start.x0[0], start.u_prev, ff[0]).q
+    pid = PIDState(np.full(N, q0), np.zeros(N), np.full(N, float(start.x0[0])))
+    s = BaselineState([np.full(N, float(v)) for v in start.x0], np.full(N, start.u_prev), pid)
+    alive = np.ones(N, dtype=bool)
+    status = ["ok"] * N
+    vlim = limit * T["w0"]
+    gens = [np.random.default_rng(int(seed)) for seed in seeds]
+    acc = {"sum_abs": np.zeros(N), "sum_sq": np.zeros(N), "max_abs": np.zeros(N)}
+    acc.update(du_max=np.zeros(N), count=0)
+    with np.errstate(all="ignore"):
+        for k, noise in _noise_blocks(gens, noise_std, n):
+            if in_win[k]:
+                e = s.x1 - xd_l[k]
+                acc["sum_abs"] += np.abs(e)
+                acc["sum_sq"] += e * e
+                np.maximum(acc["max_abs"], np.abs(e), out=acc["max_abs"])
+                acc["count"] += 1
+            applied, up = advance_baseline(c, s, k, s.x1 + noise)
+            if in_win[k]:
+                np.maximum(acc["du_max"], np.abs(applied - up), out=acc["du_max"])
+            ok = (np.abs(s.x1) <= limit) & (np.abs(s.x3) <= limit) & (np.abs(s.x2) <= vlim)
+            ok &= np.abs(s.ua) < 1e300
+            for i in np.flatnonzero(alive & ~ok):
+                why = diverged(limit, T["w0"][i], s.x1[i], s.x2[i], s.x3[i], 0.0, 0.0, 0.0, s.ua[i])
+                status[i] = f"diverged at t = {(k + 1) * dt:.6g} s: {why or 'non-finite state'}"
+                alive[i] = False
+    nan = np.full(N, np.nan)
+    acc.update(alive=alive, status=status, est_sq=[nan] * 3, est_max=[nan] * 3)
+    return acc
 
 
 def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds, dist) -> dict:

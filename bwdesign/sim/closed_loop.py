@@ -21,7 +21,16 @@ from ..observers.sampled import (
 )
 from ..observers.spec import ObserverSpec
 from ..validate import SEED, Range, integer, real
-from .kernel import SCALAR, LoopConstants, LoopState, advance, correct
+from .kernel import (
+    SCALAR,
+    BaselineConstants,
+    BaselineState,
+    LoopConstants,
+    LoopState,
+    advance,
+    advance_baseline,
+    correct,
+)
 from .result import SimulationResult
 from .run import Run, disturbance_samples, diverged, finish, prepare
 
@@ -165,7 +174,8 @@ def simulate(
     -------
     SimulationResult
         Its ``xhat`` is the posterior estimate; the PHDO's (and what its law sees) is
-        the lumped ``(x1, x2, x3 + d)``.
+        the lumped ``(x1, x2, x3 + d)``. A baseline loop (no observer) has no estimate:
+        ``xhat`` is NaN and ``estimation_rmse`` None.
 
     Raises
     ------
@@ -183,9 +193,11 @@ def simulate(
     True
     """
     run = prepare(loop, reference, duration=duration, true_params=true_params)
-    loop = _ukf_envelope(run.loop, reference)
     noise_std = real(noise_std, "noise_std", within=NOISE_STD)
     seed = integer(seed, "seed", within=SEED)
+    if run.loop.baseline:
+        return _simulate_baseline(run, noise_std, seed, window, input_disturbance, true_params)
+    loop = _ukf_envelope(run.loop, reference)
     start = run.start
     obs = make_observer(
         loop.observer,
@@ -214,6 +226,73 @@ def simulate(
     settings["path"] = path
     if dist is not None:
         settings["input_disturbance_max"] = float(np.max(np.abs(dist)))
+    return finish(run, rec, window=window, mode="sampled", settings=settings)
+
+
+def baseline_feedforward(run: Run) -> np.ndarray:
+    """The baseline's feedforward per sample, for the input applied after sample ``k``'s law:
+    at ``t_k + dt/2``, one sample later with a computation delay."""
+    loop = run.loop
+    lead = 0.5 * loop.dt + (loop.dt if loop.delay else 0.0)
+    return loop.controller.feedforward_samples(run.reference, run.t + lead)
+
+
+def _simulate_baseline(run: Run, noise_std, seed, window, input_disturbance, true_params):
+    """:func:`simulate` for a baseline loop: :func:`~bwdesign.sim.kernel.advance_baseline`."""
+    loop, n, dt = run.loop, run.n, run.loop.dt
+    ctrl = loop.controller
+    rng = np.random.default_rng(seed)
+    noise = (noise_std * rng.standard_normal(n) if noise_std > 0 else np.zeros(n)).tolist()
+    ref = run.reference_terms()
+    ff = baseline_feedforward(run)
+    c = BaselineConstants(loop, ff, ref, SCALAR)
+    tp = run.true_params[0]
+    c.set_plant(tp, dt)
+    c.dist = disturbance_samples(input_disturbance, run)
+    x0 = [float(v) for v in run.start.x0]
+    s = BaselineState(x0, float(run.start.u_prev), ctrl.start(x0[0], run.start.u_prev, ff[0]))
+    X, U, Z = np.empty((n, 3)), np.empty(n), np.empty(n)
+    limit = loop.divergence_limit
+    w0 = math.sqrt(tp.a1)
+    stable, status, m = True, "ok", n
+    for k in range(n):
+        zk = s.x1 + noise[k]
+        X[k, 0], X[k, 1], X[k, 2] = s.x1, s.x2, s.x3
+        Z[k] = zk
+        try:
+            U[k], _ = advance_baseline(c, s, k, zk)
+        except OverflowError:  # the hysteresis step of a plant outside the bounded class
+            U[k] = math.nan
+            stable, status, m = False, f"diverged at t = {(k + 1) * dt:.6g} s: overflow", k + 1
+            break
+        why = diverged(limit, w0, s.x1, s.x2, s.x3, 0.0, 0.0, 0.0, s.ua)
+        if why is not None:
+            stable, status, m = False, f"diverged at t = {(k + 1) * dt:.6g} s: {why}", k + 1
+            break
+    rec = dict(x=X[:m], xhat=np.full((m, 3), np.nan), u=U[:m], z=Z[:m], stable=stable)
+    rec.update(status=status, t=run.t[:m], x_d=ref[0][:m])
+    params = loop.model
+    settings = {
+        "plant": params.name,
+        "true_plant": tp.to_dict() if true_params is not None else None,
+        "length_unit": params.length_unit,
+        "input_unit": params.input_unit,
+        "reference": run.reference.to_dict(),
+        "observer": None,
+        "gains": None,
+        "controller": ctrl.to_dict(),
+        "u_limits": list(ctrl.u_limits) if ctrl.u_limits else None,
+        "dt": dt,
+        "duration": n * dt,
+        "noise_std": noise_std,
+        "seed": int(seed),
+        "delay": loop.delay,
+        "x0": x0,
+        "u_prev": run.start.u_prev,
+        "path": "baseline",
+    }
+    if c.dist is not None:
+        settings["input_disturbance_max"] = float(np.max(np.abs(c.dist)))
     return finish(run, rec, window=window, mode="sampled", settings=settings)
 
 

@@ -167,6 +167,7 @@ def simulate_continuous(
     solver = ContinuousSolver() if solver is None else solver
     if not isinstance(solver, ContinuousSolver):
         raise InputError(f"solver must be a ContinuousSolver, got {solver!r}")
+    loop.require_observer("the continuous simulation")
     if loop.observer.kind not in ("phso", "eso"):
         raise InputError(f"continuous observer must be 'phso' or 'eso', got {loop.observer.kind!r}")
     if getattr(loop.controller, "dt", None) is not None or loop.controller.estimate_limits:

@@ -15,6 +15,11 @@ Per sample ``k`` (see :mod:`bwdesign.sim`)::
                    (its linear part driven by u_k + d_k when the run has an input
                    disturbance), observer prediction with the applied input, next
                    delayed input
+
+A baseline loop (:class:`~bwdesign.control.baselines.BaselineController`, no observer)
+runs :func:`advance_baseline` instead: the law of
+:func:`bwdesign.control.baselines.pid_step` on the measurement ``z_k`` and the
+feedforward sample, then the same plant step.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ..control.baselines import PIDState, pid_step
 from ..control.controllers import solve_jump
 from ..control.loop import ClosedLoop
 from ..model.params import BoucWenParams
@@ -42,6 +48,9 @@ __all__ = [
     "discrete_observer_gains",
     "hysteresis_increment_batch",
     "BatchHysteresis",
+    "BaselineConstants",
+    "BaselineState",
+    "advance_baseline",
 ]
 
 
@@ -259,5 +268,55 @@ def advance(c: LoopConstants, s: LoopState, k: int) -> tuple[Any, Any]:
         if c.compensate:
             u_next = _law(c, s, s.h1, s.h2, s.hw, k + 1, applied)
         s.ua = u_next
+    s.up = applied
+    return applied, up
+
+
+class BaselineConstants(LoopConstants):
+    """What a baseline run keeps fixed: the law's numbers, the feedforward and reference
+    samples, the plant (:meth:`set_plant`, :meth:`set_plants` as for the observer loop).
+
+    ``ff[k]`` is the feedforward for the input applied after sample ``k``'s law (at
+    ``t_k + dt/2``, or ``t_{k+1} + dt/2`` with a computation delay).
+    """
+
+    __slots__ = ("law",)
+
+    def __init__(self, loop: ClosedLoop, ff: Any, ref: tuple[Any, Any, Any], ops: Ops):
+        self.law = loop.controller.constants()
+        self.ff = np.asarray(ff, dtype=float).tolist()
+        self.xd = np.asarray(ref[0], dtype=float).tolist()
+        self.delay = loop.delay
+        self.ops = ops
+        self.dist: Any = None
+
+
+class BaselineState:
+    """Plant state, held and delayed inputs, and the controller's :class:`PIDState`."""
+
+    __slots__ = ("x1", "x2", "x3", "up", "ua", "pid")
+
+    def __init__(self, x0: Any, u_prev: Any, pid: PIDState):
+        self.x1, self.x2, self.x3 = x0
+        self.up = u_prev
+        self.ua = u_prev
+        self.pid = pid
+
+
+def advance_baseline(c: BaselineConstants, s: BaselineState, k: int, zk: Any) -> tuple[Any, Any]:
+    """Sample ``k`` of a baseline loop: the law on ``z_k``, then the plant's step (the same
+    jump and ZOH step as :func:`advance`). Returns the applied input and the one before."""
+    u = pid_step(c.law, s.pid, zk, c.xd[k], c.ff[k], c.ops.clip)
+    if c.delay:
+        applied, s.ua = s.ua, u
+    else:
+        applied = u
+    up = s.up
+    x1, x2 = s.x1, s.x2
+    hh = c.plant_h(s.x3, up, applied)
+    ud = applied if c.dist is None else applied + c.dist[k]
+    s.x1 = c.p11 * x1 + c.p12 * x2 + c.p13 * hh + c.pg1 * ud
+    s.x2 = c.p21 * x1 + c.p22 * x2 + c.p23 * hh + c.pg2 * ud
+    s.x3 = hh
     s.up = applied
     return applied, up

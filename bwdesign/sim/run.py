@@ -202,7 +202,8 @@ def finish(
             metrics = tracking_metrics(e, t, win)
             sel = (t >= win[0] - 1e-12) & (t <= win[1] + 1e-12)
             d = xhat[sel] - x[sel]
-            est = tuple(float(v) for v in np.sqrt(np.mean(d * d, axis=0)))
+            if not run.loop.baseline:  # a baseline has no estimate
+                est = tuple(float(v) for v in np.sqrt(np.mean(d * d, axis=0)))
         except InputError as err:
             stable, status = False, f"no metrics: {err}"
     return SimulationResult(

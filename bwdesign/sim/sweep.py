@@ -27,6 +27,7 @@ This module is the only one that imports dask (inside functions).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
@@ -39,9 +40,11 @@ from typing import Any
 import numpy as np
 
 from .. import interrupts
+from ..control.baseline_tuning import make_baseline
 from ..control.loop import ON_REFERENCE, ClosedLoop, Start
 from ..errors import BWDesignError, ConfigError, InputError, SweepError
 from ..extras import require
+from ..model.config import BASELINE_KINDS
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox
@@ -113,7 +116,9 @@ class SweepSpec:
     gains : tuple of 3 floats
         The observer design (the PHDO runs ``(l1, l2, 0, l3)`` of it).
     observers : tuple of str
-        Observers run on every scenario (``"phso"``, ``"eso"``, ``"phdo"``).
+        Observers run on every scenario (``"phso"``, ``"eso"``, ``"phdo"``), or baselines
+        (``"pi"``, ``"pid"``, ``"pi-bwff"``, ``"pi-piff"``: no observer, the law replaced by
+        the baseline tuned for the model, dt and delay, with the law's input limits).
     noise_std : float
         Sensor noise std (length unit).
     udot_max : float, optional
@@ -144,7 +149,15 @@ class SweepSpec:
     disturbance: DisturbanceBound | None = None
 
     def loop_for(self, observer: str) -> ClosedLoop:
-        """The loop with ``observer`` on the design gains (the PHDO on ``(l1, l2, 0, l3)``)."""
+        """The loop with ``observer`` on the design gains (the PHDO on ``(l1, l2, 0, l3)``),
+        or the baseline of that name (no observer)."""
+        if observer in BASELINE_KINDS:
+            lim = self.controller.u_limits
+            ctrl = _baseline(
+                self.params, self.dt, observer, self.reference, self.delay, lim,
+                self.loop.allow_unbounded,
+            )  # fmt: skip
+            return self.loop.replace(observer=None, controller=ctrl)
         return self.loop.replace(observer=ObserverSpec.of(observer, self.gains))
 
     def gains_for(self, observer: str) -> tuple[float, ...]:
@@ -186,8 +199,21 @@ class SweepSpec:
             raise InputError(f"disturbance must be a DisturbanceBound, got {self.disturbance!r}")
 
 
+@functools.lru_cache(maxsize=32)
+def _baseline(params, dt, kind, reference, delay, limits, unbounded) -> Any:
+    """The sweep's baseline (tuned, its Prandtl-Ishlinskii fit made once per process)."""
+    return make_baseline(
+        params, dt, kind, reference=reference, delay=delay, u_limits=limits,
+        allow_unbounded=unbounded,
+    )  # fmt: skip
+
+
+#: What a sweep runs per scenario: the batched observers and the baselines.
+SWEEP_LOOPS = (*BATCH_OBSERVERS, *BASELINE_KINDS)
+
+
 def check_observers(observers: Sequence[str]) -> tuple[str, ...]:
-    """``observers`` as a tuple: each among :data:`BATCH_OBSERVERS`, each once.
+    """``observers`` as a tuple: each among :data:`SWEEP_LOOPS`, each once.
 
     Raises
     ------
@@ -196,9 +222,9 @@ def check_observers(observers: Sequence[str]) -> tuple[str, ...]:
         scenario twice).
     """
     obs = tuple(observers)
-    bad = [o for o in obs if o not in BATCH_OBSERVERS]
+    bad = [o for o in obs if o not in SWEEP_LOOPS]
     if not obs or bad:
-        raise InputError(f"sweep observers must be among {', '.join(BATCH_OBSERVERS)}, got {obs}")
+        raise InputError(f"sweep observers must be among {', '.join(SWEEP_LOOPS)}, got {obs}")
     twice = sorted({o for o in obs if obs.count(o) > 1})
     if twice:
         raise InputError(

@@ -24,6 +24,7 @@ from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
+from .baselines import baseline_comparison, configured_baseline
 from .cache import StudyCache
 from .result import (
     DEFAULT_DECAY,
@@ -67,6 +68,7 @@ SECTIONS = {
     "envelope": "[envelope] (udot_max or from_reference)",
     "reference": "[reference] (the trajectory simulated at the envelope)",
     "controller": "[controller] (lambda1, lambda2)",
+    "baseline": "[baseline] (kind; bwdesign init writes an example)",
 }
 _LOOP = ("dt", "envelope", "reference", "controller")
 NEEDS: dict[str, tuple[str, ...]] = {
@@ -87,11 +89,13 @@ NEEDS: dict[str, tuple[str, ...]] = {
     "recommendation": _LOOP,
     "versions": (),
     "corner_tracking": ("dt", "reference", "controller"),
+    "baselines": _LOOP,
+    "baseline": ("dt", "baseline"),
 }
 #: Parts computed from the ``[observer]`` gains (checked to be Hurwitz before any work).
 USES_GAINS = frozenset(
     ("configured", "tracking", "verdict", "error_dynamics", "loop", "firmware")
-    + ("recommendation", "corner_tracking")
+    + ("recommendation", "corner_tracking", "baselines")
 )
 
 #: Parts computed for any plant (the linear analyses); the others need the bounded class.
@@ -334,6 +338,17 @@ def _corner_tracking(r: _Run) -> CornerTracking:
     return CornerTracking(settings=s, duration=duration, plants=plants, result=res)
 
 
+def _baselines(r: _Run) -> Any:
+    r.say("baseline controllers beside the observer loops (nominal and worst corner)")
+    return baseline_comparison(
+        r.config,
+        gains=r.loop_gains(),
+        tuning=r["tuning"],
+        tracking=r["tracking"],
+        allow_unbounded=r.allow_unbounded,
+    )
+
+
 _COMPUTE: dict[str, Callable[[_Run], Any]] = {
     "plant": _plant,
     "envelope": _envelope,
@@ -352,6 +367,8 @@ _COMPUTE: dict[str, Callable[[_Run], Any]] = {
     "recommendation": _recommendation,
     "versions": lambda r: versions(),
     "corner_tracking": _corner_tracking,
+    "baselines": _baselines,
+    "baseline": lambda r: configured_baseline(r.config, allow_unbounded=r.allow_unbounded),
 }
 
 
@@ -386,6 +403,7 @@ def _preflight(r: _Run, asked: frozenset[str]) -> None:
         "envelope": config.envelope_spec,
         "reference": config.reference,
         "controller": config.controller,
+        "baseline": config.baseline,
     }
     missing = [text for key, text in SECTIONS.items() if key in needs and values[key] is None]
     if missing:

@@ -28,6 +28,7 @@ from ..model.params import BoucWenParams
 from ..model.uncertainty import DisturbanceBound
 from ..sim.batch import BatchResult
 from ..sim.sweep import SweepSpec
+from .baselines import BaselineComparison, ConfiguredBaseline
 from .tiers import TierSynthesis
 from .tracking import TrackingRun
 
@@ -76,13 +77,16 @@ PARTS = (
     "recommendation",
     "versions",
     "corner_tracking",
+    "baselines",
+    "baseline",
 )
-#: The parts the certified-gains report shows (all but the requirements' corner tracking).
-REPORT_PARTS = frozenset(PARTS) - {"corner_tracking"}
+#: The parts the certified-gains report shows (all but the requirements' corner tracking
+#: and the ``[baseline]`` check's analysis).
+REPORT_PARTS = frozenset(PARTS) - {"corner_tracking", "baseline"}
 #: The parts behind ``certificate.json`` without the report's own sections.
 CERTIFICATE_PARTS = frozenset(("plant", "envelope", "input", "configured", "synthesis", "firmware"))
 #: Entries of ``certificate.json`` the report's own sections add (each from its part).
-REPORT_SECTIONS = ("tier_synthesis", "sweep", "robust")
+REPORT_SECTIONS = ("tier_synthesis", "sweep", "robust", "baselines")
 
 
 @dataclass(frozen=True)
@@ -404,6 +408,12 @@ class Study:
         Python and the libraries the numbers came from.
     corner_tracking : CornerTracking
         The requirements' tracking runs (not in the report).
+    baselines : BaselineComparison
+        The baseline controllers beside the observer-based loops, nominal and at the
+        worst corner (:mod:`bwdesign.study.baselines`).
+    baseline : ConfiguredBaseline or None
+        The ``[baseline]`` controller's nominal analysis (None without the section; not
+        in the report).
     cache_key : str or None
         The key of this study in the study cache (:mod:`bwdesign.study.cache`); None
         when computed without one.
@@ -432,6 +442,8 @@ class Study:
     recommendation: Recommendation | None = None
     versions: Mapping[str, str] | None = None
     corner_tracking: CornerTracking | None = None
+    baselines: BaselineComparison | None = None
+    baseline: ConfiguredBaseline | None = None
     cache_key: str | None = field(default=None, compare=False)
     cached: frozenset[str] = field(default=frozenset(), compare=False)
 

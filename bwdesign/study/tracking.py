@@ -40,6 +40,8 @@ from ..sim.result import SimulationResult
 __all__ = [
     "TrackingRun",
     "tracking_runs",
+    "report_loops",
+    "simulate_command",
     "corner_tracking",
     "true_plants",
     "input_limits",
@@ -131,6 +133,25 @@ def tracking_runs(
     """
     ref = config.reference
     duration = 3.0 * ref.period if ref.period is not None else 1.0
+    runs = []
+    for label, loop in report_loops(
+        config, gains=gains, tuning=tuning, allow_unbounded=allow_unbounded
+    ).items():
+        r = simulate(loop, ref, duration=duration)
+        runs.append(
+            TrackingRun(
+                label=label,
+                command=tuple(simulate_command(config, loop, duration, allow_unbounded)),
+                result=r,
+            )
+        )
+    return tuple(runs)
+
+
+def report_loops(
+    config: StageConfig, *, gains: Any, tuning: Any, allow_unbounded: bool = False
+) -> dict[str, ClosedLoop]:
+    """The report's six loops by label (``"PHSO (eq. 12)"``, ...), in table order."""
     loops = {
         # the report's digital runs are simulated without the tuning's computation delay
         "eq. 12": lambda obs: ClosedLoop.from_config(
@@ -140,21 +161,15 @@ def tracking_runs(
             config, observer=obs, law=tuning, allow_unbounded=allow_unbounded
         ).replace(delay=False),
     }
-    runs = []
-    for (law, make), observer in product(loops.items(), OBSERVERS):
-        loop = make(observer)
-        r = simulate(loop, ref, duration=duration)
-        runs.append(
-            TrackingRun(
-                label=f"{observer.upper()} ({law})",
-                command=tuple(_command(config, loop, duration, allow_unbounded)),
-                result=r,
-            )
-        )
-    return tuple(runs)
+    return {
+        f"{observer.upper()} ({law})": make(observer)
+        for (law, make), observer in product(loops.items(), OBSERVERS)
+    }
 
 
-def _command(config: StageConfig, loop: ClosedLoop, duration: float, unbounded: bool) -> list:
+def simulate_command(
+    config: StageConfig, loop: ClosedLoop, duration: float, unbounded: bool
+) -> list:
     """The ``bwdesign simulate`` arguments that rerun ``loop`` (the reference from the file)."""
     ctrl, dt = loop.controller, loop.dt
     argv = ["simulate", "--plant", config.source, "--observer", loop.observer.kind]

@@ -12,7 +12,9 @@ the parts its requirements name) and compares it with a limit, giving a
   last two reference periods;
 - ``min_gain_margin_db``, ``min_phase_margin_deg``: its ``loop`` analysis at dt (the
   report's "eq. 12, sampled at dt" row);
-- synthesis: its ``synthesis``.
+- synthesis: its ``synthesis``;
+- ``baseline_stable``: its ``baseline`` part, the ``[baseline]`` PI/PID's sampled
+  nominal linear loop (stable at the tuning slope and over the hysteresis slope range).
 
 :func:`check_requirements` computes one study for all of a file's requirements.
 """
@@ -40,6 +42,7 @@ __all__ = [
     "check_synthesis",
     "check_tracking",
     "check_margins",
+    "check_baseline",
     "check_requirements",
     "failure_table",
 ]
@@ -408,6 +411,29 @@ def check_margins(
     return _margins(config, study(config, parts={"loop"}), gm, pm)
 
 
+def _baseline_stable(config: StageConfig, s: Study) -> Check:
+    """The ``baseline_stable`` check from the study's ``baseline`` analysis."""
+    b = s.baseline
+    a = b.analysis
+    return Check(
+        _name(config),
+        "baseline_stable",
+        a.stable,
+        a.stable,
+        True,
+        f"[baseline] {b.kind}: {a.describe()}",
+        details={"baseline": b.to_dict()},
+    )
+
+
+def check_baseline(config: StageConfig, *, cache: StudyCache | None = None) -> Check:
+    """Is the ``[baseline]`` controller's sampled nominal loop stable (with its margins)?"""
+    _need(
+        config, "the baseline check", **{"[baseline]": config.baseline, "[sampling] dt": config.dt}
+    )
+    return _baseline_stable(config, study(config, parts={"baseline"}, cache=cache))
+
+
 def _min_decay(c: Check, limit: float) -> Check:
     v = float(c.details["decay_rate"])
     text = f"certified decay {v:.4g} 1/s {'>=' if v >= limit else '<'} {limit:g}"
@@ -452,6 +478,8 @@ def check_requirements(stage: Any, *, cache: StudyCache | None = None) -> list[C
         )
     if gm is not None or pm is not None:
         out += _not_analysed(config, gm, pm, why) if s is None else _margins(config, s, gm, pm)
+    if req.get("baseline_stable"):
+        out.append(check_baseline(config, cache=cache))
     order = list(REQUIREMENT_KEYS)
     return sorted(out, key=lambda c: order.index(c.name))
 
