@@ -696,6 +696,22 @@ def _copy_level(d: dict, dh: float, rows: np.ndarray) -> np.ndarray:
     return step, np.minimum(step, alt + np.abs(rows @ b) * level)
 
 
+def _rate_clause(step: float, udot_max: float, dt: float, unit: str) -> str:
+    """The verdict's input-rate clause: proved (the certificate's own bound on the input
+    steps keeps the envelope it assumed, so the assumption holds once the loop is in
+    its steady set) or stated as the condition it is."""
+    if step <= udot_max * dt:
+        return (
+            f"and the loop's input keeps |u'| <= {udot_max:.4g} {unit}/s (proved: the "
+            f"certificate bounds it by {step / dt:.4g} {unit}/s in steady state, a margin of "
+            f"{udot_max * dt / step:.3g}x)"
+        )
+    return (
+        f"if the loop's input keeps |u'| <= {udot_max:.4g} {unit}/s (assumed, not proved: "
+        f"this certificate bounds the loop's own input rate only by {step / dt:.4g} {unit}/s)"
+    )
+
+
 def _contraction(ell: _Ellipsoids, a: float | None, spec: float, c: np.ndarray):
     """``(solution, a)``: at the given contraction, or the one with the smallest bound."""
     if a is not None:
@@ -774,9 +790,7 @@ def _conclude(
             f"certified over {base['n_vertices']} corners (+{base['n_interior']} interior "
             f"points): steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
             f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s, "
-            f"for a loop whose input keeps |u'| <= {udot_max:.4g} {params.input_unit}/s (an "
-            "assumption: this certificate bounds the loop's own input rate only by "
-            f"{step / dt:.4g} {params.input_unit}/s)"
+            + _rate_clause(step, udot_max, dt, params.input_unit)
         )
         if st.dist != (0.0, 0.0):
             unit = params.input_unit
@@ -807,6 +821,9 @@ def _conclude(
             "dt": dt,
             "input_step_bound": step,
             "bound_method": method,
+            # the envelope shown by the certificate itself (a fixed point), or assumed
+            "rate_proved": bool(holds and step is not None and step <= udot_max * dt),
+            "rate_margin": (udot_max * dt / step) if holds and step else None,
         },
         **base,
     )

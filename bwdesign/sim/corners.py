@@ -11,7 +11,7 @@ from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from .batch import BatchResult, simulate_batch
 
-__all__ = ["simulate_corners", "disturbance_signals"]
+__all__ = ["simulate_corners", "simulate_plants", "disturbance_signals"]
 
 
 def disturbance_signals(bound: DisturbanceBound, t: np.ndarray) -> np.ndarray:
@@ -46,6 +46,17 @@ def simulate_corners(
     envelope a robust certificate assumes. With a ``disturbance`` every corner runs
     each of :func:`disturbance_signals` (four scenarios per corner).
     """
+    return simulate_plants(loop, box.vertices(loop.model), reference, disturbance)
+
+
+def simulate_plants(
+    loop: ClosedLoop,
+    plants: list,
+    reference: Reference,
+    disturbance: DisturbanceBound | None = None,
+) -> BatchResult:
+    """:func:`simulate_corners` for any list of plants (duration, window, disturbance
+    scenarios as there: ``len(plants) x`` the disturbance's signals, plant-major)."""
     if reference.period is not None:
         duration, window = max(3 * reference.period, 0.5), None
     else:
@@ -53,7 +64,7 @@ def simulate_corners(
         duration = max(settles + 1.0, 1.0)
         moves = [float(b) for b in reference.breakpoints(0.0, settles)]
         window = (min(moves, default=0.0), duration) if settles > 0 else None
-    corners = box.vertices(loop.model)
+    corners = list(plants)
     dist: Any = None
     if disturbance is not None and not disturbance.none:
         t = np.arange(int(round(duration / loop.dt))) * loop.dt

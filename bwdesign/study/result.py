@@ -27,6 +27,7 @@ from ..model.envelope import Envelope
 from ..model.params import BoucWenParams
 from ..model.uncertainty import DisturbanceBound
 from ..sim.batch import BatchResult
+from ..sim.falsify import Falsification
 from ..sim.sweep import SweepSpec
 from .baselines import BaselineComparison, ConfiguredBaseline
 from .tiers import TierSynthesis
@@ -299,12 +300,19 @@ class RobustLoop:
     samples: int
     all_corners_stable: bool
     conservatism: float | None
+    #: the falsifier's search (corners, interior, seeded optimiser): the found worst case
+    found: Falsification | None = None
 
     def to_dict(self) -> dict[str, Any]:
         doc = {f.name: getattr(self, f.name) for f in fields(self)}
         for k in ("gains", "simulated_worst_estimation_maxe", "simulated_window"):
             doc[k] = list(doc[k])
         doc["certificate"] = self.certificate.to_dict()
+        doc["found"] = self.found.to_dict() if self.found is not None else None
+        # the certified upper bound, the found lower bound and their ratio, side by side
+        doc["tracking_bound"] = self.certificate.tracking_bound
+        doc["found_worst_maxe"] = self.simulated_worst_maxe
+        doc["found_ratio"] = self.conservatism
         return doc
 
 

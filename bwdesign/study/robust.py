@@ -30,12 +30,15 @@ from ..certify.robust import certify_robust
 from ..control.loop import ClosedLoop
 from ..design.robust import certified_envelope
 from ..design.tuning import DigitalTuning
+from ..errors import InternalError
 from ..model.config import StageConfig
-from ..sim.corners import simulate_corners
+from ..sim.falsify import falsify
 from .result import RobustLoop, RobustStudy
 
 __all__ = ["robust_study", "robust_loop", "ROBUST_OBSERVERS"]
 
+#: The falsifier's search beside each certificate (:func:`bwdesign.sim.falsify.falsify`).
+FALSIFIER = {"interior": 8, "rounds": 2, "per_round": 8, "seed": 0}
 #: The observers of the robust section, in table order.
 ROBUST_OBSERVERS = ("phso", "phdo")
 
@@ -48,13 +51,15 @@ def robust_loop(
     gains = tuning.observer_gains_for(observer)
     loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
     dist = config.disturbance if config.disturbance and not config.disturbance.none else None
-    sim = simulate_corners(loop, box, ref, dist)
-    stable = bool(sim.stable.all())
-    rate = float(np.nanmax(sim.input_rate_max)) if stable else math.nan
+    found = falsify(loop, box, ref, disturbance=dist, **FALSIFIER)
+    stable = found.stable
+    rate = found.input_rate_max if stable else math.nan
     env = certified_envelope(udot_max, rate) if stable else udot_max
     rc = certify_robust(loop, uncertainty=box, udot_max=env, reference=ref, disturbance=dist)
-    worst = float(np.nanmax(sim.maxe)) if stable else math.nan
-    worst_est = np.nanmax(sim.estimation_maxe, axis=0) if stable else np.full(3, math.nan)
+    worst = found.worst_maxe if stable else math.nan
+    worst_est = np.array(found.worst_estimation_maxe) if stable else np.full(3, math.nan)
+    if rc.holds:
+        _require_sound(rc, worst, worst_est, observer)
     ratio = rc.tracking_bound / worst if rc.holds and worst > 0 else None
     return RobustLoop(
         observer=observer,
@@ -64,11 +69,26 @@ def robust_loop(
         simulated_input_rate_max=rate,
         simulated_worst_maxe=worst,
         simulated_worst_estimation_maxe=tuple(worst_est.tolist()),
-        simulated_window=tuple(sim.window),
-        samples=sim.samples,
+        simulated_window=tuple(found.window),
+        samples=found.samples,
         all_corners_stable=stable,
         conservatism=ratio,
+        found=found,
     )
+
+
+def _require_sound(rc, worst: float, worst_est: np.ndarray, observer: str) -> None:
+    """A found case above a certified bound is a defect, never a report."""
+    for what, b, w in (
+        ("tracking", rc.tracking_bound, worst),
+        ("x1 estimation", rc.estimation_bound, worst_est[0]),
+        ("x3 estimation", rc.x3_estimation_bound, worst_est[2]),
+    ):
+        if b is not None and w > b * (1 + 1e-9):
+            raise InternalError(
+                f"the {observer} robust certificate's {what} bound {b:.6g} is below a case "
+                f"the falsifier found ({w:.6g}): the certificate is wrong"
+            )
 
 
 def robust_study(config: StageConfig, tuning: DigitalTuning, udot_max: float) -> RobustStudy:
