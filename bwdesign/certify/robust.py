@@ -138,9 +138,8 @@ from .ellipsoid import (
     search_log_contraction,
     solution,
 )
-from .peak import l1_norms, peak_bounds
 from .results import CONTRACTION, Margin, RobustCertificate
-from .robust_cover import cover_inputs
+from .robust_cover import cover_inputs, input_step_bound, plant_peaks
 
 __all__ = ["RobustCertificate", "certify_robust"]
 
@@ -505,7 +504,7 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
         E = (mats[1][0] - mats[0][0]) / (rhos[1] - rhos[0])
         rows.append(E @ GiB @ M)  # the rho coupling of the quasi-static part
     rows += [np.array([c @ GiB @ M for c in st.statics])]
-    for A, _ in mats:  # the input steps' reference part, per rho end (_input_step)
+    for A, _ in mats:  # the input steps' reference part, per rho end (input_step_bound)
         v = (A - np.eye(n)).T @ st.cu
         rows.append(((v @ GiB + st.cu @ Bref) @ M + st.su[:5] @ dM)[None, :])
     # fast inputs (j, dh, n), then the disturbance's increment and within-sample remainder
@@ -624,78 +623,6 @@ class _Ellipsoids:
         return margins, peak, dyn
 
 
-def _input_step(st: _Setup, data: list[dict], dyn, hb: np.ndarray, noise_max: float) -> float:
-    """Bound on ``|u_{k+1} - u_k|`` in steady state, over every plant and rho end.
-
-    ``u_{k+1} - u_k = v' z_k + cu' B s_k + su' (s_{k+1} - s_k)`` with
-    ``v = (A - I)' cu``, ``z = z~ + G^-1 w_slow`` and ``x3_{k+1} - x3_k = j_k``;
-    the disturbance acts on the plant only (``su`` has no entry for it).
-    """
-    cu, su, n = st.cu, st.su, st.n
-    worst = 0.0
-    j_, dh_ = float(hb[1]), float(hb[2])
-    dmax, (r1, r2) = st.dist[0], (float(hb[3]), float(hb[4]))
-    for i, d in enumerate(data):
-        Gib, hv = d["Gib"], d["hyst"][0]
-        for (A, B), ref in zip(d["mats"], d["step_ref"], strict=True):
-            v = (A - np.eye(n)).T @ cu
-            total = (
-                dyn(v, i)
-                + float(ref)
-                + abs(v @ Gib + cu @ B[:, 5]) * hv
-                + abs(su[5]) * j_
-                + (abs(cu @ B[:, 6]) + 2 * abs(su[6])) * j_
-                + (abs(cu @ B[:, 7]) + 2 * abs(su[7])) * dh_
-                + (abs(cu @ B[:, 8]) + 2 * abs(su[8])) * noise_max
-            )
-            if dmax > 0 or r1 > 0:
-                total += (
-                    abs(v @ d["Gid"] + cu @ B[:, 9]) * dmax
-                    + abs(cu @ B[:, 10]) * r1
-                    + abs(cu @ B[:, 11]) * r2
-                )
-            worst = max(worst, total)
-    return worst
-
-
-def _peaks(st: _Setup, data: list[dict], W: np.ndarray) -> list[np.ndarray] | None:
-    """Per plant, :func:`.peak.peak_bounds` of ``|c'z~|`` for the three outputs, of
-    ``(A_c - I)'cu . z~`` and (PHSO) of ``cu'E z~``: the input step's ``z~`` part at
-    either end of ``rho``. None if any plant has none (then the ellipsoid's stand)."""
-    n, out = st.n, []
-    for d in data:
-        A_c = np.mean([A for A, _ in d["blocks"]], axis=0)
-        rows = np.array(
-            [
-                *st.statics,
-                (A_c - np.eye(n)).T @ st.cu,
-                d["E"].T @ st.cu if d["E"] is not None else np.zeros(n),
-            ]
-        )
-        Wp = W.copy()  # this plant's own channel bounds
-        Wp[: n + 2] = np.concatenate([d["chan"], d["hyst"][1:]])
-        pb = peak_bounds(d["blocks"], st.rhos, Wp, rows)
-        if pb is None:
-            return None
-        if d["E"] is None and Wp[n + 1] > 0:  # PHDO: dh also as the copy error's increment
-            step, smaller = _copy_level(d, Wp[n + 1], rows[:3])
-            pb[:3] += smaller - step
-        out.append(pb)
-    return out
-
-
-def _copy_level(d: dict, dh: float, rows: np.ndarray) -> np.ndarray:
-    """What the PHDO's ``dh`` channel ``(rho - 1) e3 + dh`` adds to ``|rows z~|``, taken
-    as a step (``|.| <= dh``) and, less where smaller, as the increment of the copy
-    error ``e3`` (``|e3| <= level``, ``.ellipsoid.copy_error_bound``): ``z~ - b e3`` sees
-    ``(A - I) b e3``, a level. Returns ``(step, smaller)``."""
-    (A, B), n = d["blocks"][0], len(d["blocks"][0][0])
-    b, level = B[:, n + 1], d["copy_error"]
-    step = l1_norms(A, b[:, None], rows)[:, 0] * dh
-    alt = l1_norms(A, ((A - np.eye(n)) @ b)[:, None], rows)[:, 0] * level
-    return step, np.minimum(step, alt + np.abs(rows @ b) * level)
-
-
 def _rate_clause(step: float, udot_max: float, dt: float, unit: str) -> str:
     """The verdict's input-rate clause: proved (the certificate's own bound on the input
     steps keeps the envelope it assumed, so the assumption holds once the loop is in
@@ -755,7 +682,7 @@ def _conclude(
     params, lp = st.params, st.lp
     margins, peak, dyn = ell.check(sol, av, st, data)
     holds = all(m.passed for m in margins)
-    step = _input_step(st, data, lambda v, _: dyn(v), hb, noise_max) if holds else None
+    step = input_step_bound(st, data, lambda v, _: dyn(v), hb, noise_max) if holds else None
     bounds = [peak(0), None, None]
     # the estimation bounds: their own objective at the same contraction
     for i in (1, 2):
@@ -769,7 +696,7 @@ def _conclude(
     method = "ellipsoid"
     half = (st.rhos[-1] - st.rhos[0]) / 2
     for (hb2, W2, _), dd in covers if holds else ():
-        l1 = _peaks(st, dd, W2)  # the per-plant peak-to-peak bounds (.peak), where smaller
+        l1 = plant_peaks(st, dd, W2)  # the per-plant peak-to-peak bounds (.peak), where smaller
         if l1 is None:
             continue
         for i in range(3):
@@ -777,7 +704,7 @@ def _conclude(
             if bounds[i] is None or b < bounds[i]:
                 bounds[i], method = b, "peak-to-peak"
         dyn1 = lambda v, j, l1=l1: l1[j][3] + half * l1[j][-1]  # noqa: E731
-        step = min(step, _input_step(st, dd, dyn1, hb2, noise_max))
+        step = min(step, input_step_bound(st, dd, dyn1, hb2, noise_max))
     if bounds[1] is not None:
         bounds[1] += abs(lp.K[0]) * noise_max
     if bounds[2] is not None:

@@ -1,4 +1,5 @@
-"""The input channels of the robust loop certificate (:mod:`.robust`): two covers.
+"""The input channels of the robust loop certificate (:mod:`.robust`) and the bounds
+computed from them beside the ellipsoid: its input steps and the per-plant peaks.
 
 The reference enters the error system through its terms ``r_k = M sigma(t_k)``. Two
 ways to bound what they do; :func:`bwdesign.certify_robust` certifies with both and
@@ -25,9 +26,10 @@ import numpy as np
 from ..model.reference_cover import sup_abs
 from ..model.references import Reference
 from .ellipsoid import disturbance_remainder
+from .peak import l1_norms, peak_bounds
 from .response import response_sups
 
-__all__ = ["cover_inputs", "deterministic"]
+__all__ = ["cover_inputs", "deterministic", "input_step_bound", "plant_peaks", "copy_level"]
 
 
 def cover_inputs(
@@ -117,3 +119,75 @@ def deterministic(st: Any, reference: Reference, data: list[dict]) -> np.ndarray
     B = np.array([d["Bref"] for d in data])
     out = response_sups(A, B, st.M, reference, st.lp.dt, (np.array(Lz), Lr, incr))
     return None if out is None or not np.all(np.isfinite(out)) else out
+
+
+def input_step_bound(st: Any, data: list[dict], dyn, hb: np.ndarray, noise_max: float) -> float:
+    """Bound on ``|u_{k+1} - u_k|`` in steady state, over every plant and rho end.
+
+    ``u_{k+1} - u_k = v' z_k + cu' B s_k + su' (s_{k+1} - s_k)`` with
+    ``v = (A - I)' cu``, ``z = z~ + G^-1 w_slow`` and ``x3_{k+1} - x3_k = j_k``;
+    the disturbance acts on the plant only (``su`` has no entry for it).
+    """
+    cu, su, n = st.cu, st.su, st.n
+    worst = 0.0
+    j_, dh_ = float(hb[1]), float(hb[2])
+    dmax, (r1, r2) = st.dist[0], (float(hb[3]), float(hb[4]))
+    for i, d in enumerate(data):
+        Gib, hv = d["Gib"], d["hyst"][0]
+        for (A, B), ref in zip(d["mats"], d["step_ref"], strict=True):
+            v = (A - np.eye(n)).T @ cu
+            total = (
+                dyn(v, i)
+                + float(ref)
+                + abs(v @ Gib + cu @ B[:, 5]) * hv
+                + abs(su[5]) * j_
+                + (abs(cu @ B[:, 6]) + 2 * abs(su[6])) * j_
+                + (abs(cu @ B[:, 7]) + 2 * abs(su[7])) * dh_
+                + (abs(cu @ B[:, 8]) + 2 * abs(su[8])) * noise_max
+            )
+            if dmax > 0 or r1 > 0:
+                total += (
+                    abs(v @ d["Gid"] + cu @ B[:, 9]) * dmax
+                    + abs(cu @ B[:, 10]) * r1
+                    + abs(cu @ B[:, 11]) * r2
+                )
+            worst = max(worst, total)
+    return worst
+
+
+def plant_peaks(st: Any, data: list[dict], W: np.ndarray) -> list[np.ndarray] | None:
+    """Per plant, :func:`.peak.peak_bounds` of ``|c'z~|`` for the three outputs, of
+    ``(A_c - I)'cu . z~`` and (PHSO) of ``cu'E z~``: the input step's ``z~`` part at
+    either end of ``rho``. None if any plant has none (then the ellipsoid's stand)."""
+    n, out = st.n, []
+    for d in data:
+        A_c = np.mean([A for A, _ in d["blocks"]], axis=0)
+        rows = np.array(
+            [
+                *st.statics,
+                (A_c - np.eye(n)).T @ st.cu,
+                d["E"].T @ st.cu if d["E"] is not None else np.zeros(n),
+            ]
+        )
+        Wp = W.copy()  # this plant's own channel bounds
+        Wp[: n + 2] = np.concatenate([d["chan"], d["hyst"][1:]])
+        pb = peak_bounds(d["blocks"], st.rhos, Wp, rows)
+        if pb is None:
+            return None
+        if d["E"] is None and Wp[n + 1] > 0:  # PHDO: dh also as the copy error's increment
+            step, smaller = copy_level(d, Wp[n + 1], rows[:3])
+            pb[:3] += smaller - step
+        out.append(pb)
+    return out
+
+
+def copy_level(d: dict, dh: float, rows: np.ndarray) -> np.ndarray:
+    """What the PHDO's ``dh`` channel ``(rho - 1) e3 + dh`` adds to ``|rows z~|``, taken
+    as a step (``|.| <= dh``) and, less where smaller, as the increment of the copy
+    error ``e3`` (``|e3| <= level``, ``.ellipsoid.copy_error_bound``): ``z~ - b e3`` sees
+    ``(A - I) b e3``, a level. Returns ``(step, smaller)``."""
+    (A, B), n = d["blocks"][0], len(d["blocks"][0][0])
+    b, level = B[:, n + 1], d["copy_error"]
+    step = l1_norms(A, b[:, None], rows)[:, 0] * dh
+    alt = l1_norms(A, ((A - np.eye(n)) @ b)[:, None], rows)[:, 0] * level
+    return step, np.minimum(step, alt + np.abs(rows @ b) * level)
