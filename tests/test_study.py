@@ -33,15 +33,22 @@ def test_every_part_has_its_needs_and_the_report_all_but_the_requirements_ones()
 
 def test_a_part_not_asked_is_none_and_says_so():
     config = load_config(STAGE)
-    s = study(config, parts={"loop", "sweep", "robust"})
-    # "sweep" and "robust" do not apply (no [sweep], no [uncertainty]): computed as None;
-    # the envelope comes with them (the robust certificate would need it)
-    assert s.parts == {"envelope", "loop", "sweep", "robust"}
-    assert s.sweep is None and s.get("sweep") is None and s.get("robust") is None
+    s = study(config, parts={"loop", "sweep"})
+    # "sweep" does not apply (no [sweep]): computed as None
+    assert s.parts == {"loop", "sweep"}
+    assert s.sweep is None and s.get("sweep") is None
+    # without [uncertainty] the robust part is the nominal loop's certificate alone
+    r = study(config, parts={"robust"})
+    assert r.parts == {"envelope", "tuning", "robust"}
+    assert r.robust.loops == () and [lp.observer for lp in r.robust.nominal] == ["phso", "phdo"]
+    assert all(lp.certificate.holds for lp in r.robust.nominal)
+    assert all(
+        lp.certificate.tracking_bound >= lp.simulated_worst_maxe > 0 for lp in r.robust.nominal
+    )
     assert s.loop.gains == config.gains and s.loop.sampled.dt == config.dt
     assert s.synthesis is None and s.tracking is None
     with pytest.raises(
-        InputError, match=r"did not compute the part 'synthesis' \(computed: envelope, loop"
+        InputError, match=r"did not compute the part 'synthesis' \(computed: loop"
     ):
         s.get("synthesis")
     with pytest.raises(InputError, match="unknown study part"):

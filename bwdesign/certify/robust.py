@@ -114,7 +114,7 @@ recomputed from ``P`` with numpy. Solver trouble is a status, never a certificat
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -125,7 +125,7 @@ from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import discretize
-from ..model.reference_cover import require_coverable
+from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
 from ..observers.gains import check_gains, discrete_gains
@@ -145,6 +145,8 @@ __all__ = ["RobustCertificate", "certify_robust"]
 
 #: Exogenous entries of one step: reference terms, x3, j, dh, n, d, r1, r2 (:func:`_step`).
 _NS = 12
+#: Bounds below this share of the loop's signal size (sup |x_d| + h_max) are stated as it.
+ROUNDING = 1e-12
 #: Normalised eigenvalue below which an interior block joins the LMI.
 _ACTIVE_TOL = 1e-9
 #: Contraction search: grid points on log(1 - a), then golden-section steps.
@@ -308,8 +310,12 @@ def certify_robust(
     uncertainty.check(params)  # every corner (so every plant in the box) bounded
     vertices = uncertainty.vertices(params)
     rng = np.random.default_rng(seed)
-    interior = uncertainty.sample(params, rng, int(interior_samples))
+    # a box of zero width is the nominal plant alone: nothing inside to sample
+    varying = any(lo != hi for lo, hi in uncertainty.bounds(params).values())
+    interior = uncertainty.sample(params, rng, int(interior_samples)) if varying else []
     st = _setup(params, lp, observer, udot_max, disturbance_bounds(disturbance))
+    size = float(sup_abs(reference, lp.dt, np.eye(9)[:1])[0]) + params.bounded_class().h_max
+    st = replace(st, scale=size)
     data_v = [_plant_data(st, tp) for tp in vertices]
     data_i = [_plant_data(st, tp) for tp in interior]
     data = data_v + data_i
@@ -447,6 +453,8 @@ class _Setup:
     su: np.ndarray
     #: the input disturbance's bounds ``(input_max, rate_max)``, (0, 0) for none
     dist: tuple[float, float] = (0.0, 0.0)
+    #: the size of the loop's signals, ``sup |x_d| + h_max`` (length unit)
+    scale: float = 0.0
 
     @property
     def n(self) -> int:
@@ -709,13 +717,22 @@ def _conclude(
         bounds[1] += abs(lp.K[0]) * noise_max
     if bounds[2] is not None:
         bounds[2] += abs(lp.K[2]) * noise_max
+    # no bound finer than double precision resolves: the loop's signals are of the size
+    # of the reference and the hysteresis, computed to a few ulps of that
+    floor = ROUNDING * st.scale
+    bounds = [None if b is None else max(b, floor) for b in bounds]
     decay = -math.log(av) / (2 * dt)
     worst = max(margins, key=lambda m: m.value - m.limit)
     udot_max = st.udot_max
     if holds:
         status = (
-            f"certified over {base['n_vertices']} corners (+{base['n_interior']} interior "
-            f"points): steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
+            (
+                f"certified over {base['n_vertices']} corners (+{base['n_interior']} interior "
+                "points)"
+                if base["n_vertices"] > 1 or base["n_interior"]
+                else "certified for the nominal plant"
+            )
+            + f": steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
             f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s, "
             + _rate_clause(step, udot_max, dt, params.input_unit)
         )

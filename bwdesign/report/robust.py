@@ -26,6 +26,9 @@ def robust_section(doc: Document, study: Study) -> None:
     params, ref, dt = config.plant, config.reference, float(config.dt)
     lu, iu = params.length_unit, params.input_unit
     loops, bounds, udot_max = part.loops, part.bounds, part.udot_max
+    if not loops:
+        _nominal_section(doc, study)
+        return
     doc.heading("Robust certificate over the uncertainty box")
     widths = ", ".join(f"{k} in [{lo:.6g}, {hi:.6g}]" for k, (lo, hi) in bounds.items() if lo != hi)
     n_corners = loops[0].certificate.n_vertices
@@ -69,20 +72,7 @@ def robust_section(doc: Document, study: Study) -> None:
             + "."
         )
 
-    def cell(x: float | None) -> str:
-        return "—" if x is None or not math.isfinite(x) else f"{x:.4g}"
-
-    rows = []
-    for lp in loops:
-        rc, est = lp.certificate, lp.simulated_worst_estimation_maxe
-        name = lp.observer.upper()
-        for what, b, w in (
-            (f"max |x1 - x_d| ({lu})", rc.tracking_bound, lp.simulated_worst_maxe),
-            (f"max |x1hat - x1| ({lu})", rc.estimation_bound, est[0]),
-            (f"max |x3hat - x3| ({lu})", rc.x3_estimation_bound, est[2]),
-        ):
-            ratio = b / w if rc.holds and b is not None and w > 0 else None
-            rows.append([name, what, cell(b), cell(w), cell(ratio)])
+    rows = _rows(loops, lu) + _rows(part.nominal, lu, " (nominal)")
     w0, w1 = loops[0].simulated_window
     found = loops[0].found
     searched = (
@@ -97,18 +87,10 @@ def robust_section(doc: Document, study: Study) -> None:
         f"is the largest |error| the falsifier found over {searched}, over "
         + ("the last two reference periods" if ref.period else "the last half of the run")
         + f" ({w0:g} .. {w1:g} s of {loops[0].samples * dt:g} s, from the reference's "
-        "initial state)."
+        "initial state). The nominal rows are the same certificate for the nominal plant "
+        "alone (a box of zero width)."
     )
-    doc.table(
-        [
-            "observer",
-            "steady error",
-            "certified bound",
-            "worst found",
-            "certified / found",
-        ],
-        rows,
-    )
+    doc.table(_HEADER, rows)
     ratios = [f"{lp.observer.upper()} {lp.conservatism:.3g}" for lp in loops if lp.conservatism]
     if ratios:
         doc.para(
@@ -116,3 +98,40 @@ def robust_section(doc: Document, study: Study) -> None:
             "`bwdesign synthesize --plant FILE --robust` searches gains and laws against the "
             "box for the smallest certified bound."
         )
+
+
+_HEADER = ["observer", "steady error", "certified bound", "worst found", "certified / found"]
+
+
+def _cell(x: float | None) -> str:
+    return "—" if x is None or not math.isfinite(x) else f"{x:.4g}"
+
+
+def _rows(loops, lu: str, tag: str = "") -> list[list[str]]:
+    rows = []
+    for lp in loops:
+        rc, est = lp.certificate, lp.simulated_worst_estimation_maxe
+        name = lp.observer.upper() + tag
+        for what, b, w in (
+            (f"max |x1 - x_d| ({lu})", rc.tracking_bound, lp.simulated_worst_maxe),
+            (f"max |x1hat - x1| ({lu})", rc.estimation_bound, est[0]),
+            (f"max |x3hat - x3| ({lu})", rc.x3_estimation_bound, est[2]),
+        ):
+            ratio = b / w if rc.holds and b is not None and w > 0 else None
+            rows.append([name, what, _cell(b), _cell(w), _cell(ratio)])
+    return rows
+
+
+def _nominal_section(doc: Document, study: Study) -> None:
+    """A stage without ``[uncertainty]``: the certificate of the nominal loop alone."""
+    part, lu = study.robust, study.config.plant.length_unit
+    doc.heading("Certificate of the nominal loop")
+    doc.para(
+        "The robust loop certificate (bwdesign.certify_robust) for the nominal plant alone "
+        "(a box of zero width): the digital tuning's loop, no sensor noise, beside the worst "
+        "case simulated (bwdesign.sim.falsify). The stage has no [uncertainty] box; add one "
+        "for the certificate over the plants it allows."
+    )
+    for lp in part.nominal:
+        doc.para(f"{lp.observer.upper()}: verdict: {lp.certificate.status}.")
+    doc.table(_HEADER, _rows(part.nominal, lu, " (nominal)"))

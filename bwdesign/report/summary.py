@@ -93,6 +93,13 @@ def _tracking_row(s: Study) -> str:
         )
         name = "eq. 12 with the configured constants" if law != "eq. 12" else "digital tuning"
         text += f" ({name}: {what})"
+    nominal = () if s.robust is None else s.robust.nominal
+    nom = next((lp.certificate for lp in nominal if lp.observer == "phso"), None)
+    if law == "digital tuning" and nom is not None and nom.holds:
+        text += (
+            f"; certified for the nominal plant: steady max |x1 - x_d| <= "
+            f"{fmt(nom.tracking_bound, 3)} {lu}"
+        )
     rob = None if s.robust is None else s.robust.loop("phso")
     if law == "digital tuning" and rob is not None:
         cert = rob.certificate

@@ -318,19 +318,23 @@ class RobustLoop:
 
 @dataclass(frozen=True)
 class RobustStudy:
-    """Robust certificates over ``[uncertainty]`` for the digital tuning's loop (PHSO, PHDO)."""
+    """Robust certificates over ``[uncertainty]`` (``loops``; none without a box) and for
+    the nominal plant (``nominal``) of the digital tuning's loop (PHSO, PHDO)."""
 
     udot_max: float
     bounds: dict[str, tuple[float, float]]
     loops: tuple[RobustLoop, ...]
     #: the stage's input disturbance the certificates assumed (None: none)
     disturbance: DisturbanceBound | None = None
+    #: the same certificate for the nominal plant alone (a box of zero width)
+    nominal: tuple[RobustLoop, ...] = ()
 
     def loop(self, observer: str) -> RobustLoop | None:
         return next((lp for lp in self.loops if lp.observer == observer), None)
 
     def to_dict(self) -> dict[str, Any]:
         doc: dict[str, Any] = {"observers": {lp.observer: lp.to_dict() for lp in self.loops}}
+        doc["nominal"] = {lp.observer: lp.to_dict() for lp in self.nominal}
         if self.disturbance is not None:
             doc["disturbance"] = self.disturbance.to_dict()
         return doc

@@ -32,6 +32,7 @@ from ..design.robust import certified_envelope
 from ..design.tuning import DigitalTuning
 from ..errors import InternalError
 from ..model.config import StageConfig
+from ..model.uncertainty import UncertaintyBox
 from ..sim.falsify import falsify
 from .result import RobustLoop, RobustStudy
 
@@ -44,10 +45,16 @@ ROBUST_OBSERVERS = ("phso", "phdo")
 
 
 def robust_loop(
-    config: StageConfig, tuning: DigitalTuning, udot_max: float, observer: str
+    config: StageConfig,
+    tuning: DigitalTuning,
+    udot_max: float,
+    observer: str,
+    box: UncertaintyBox | None = None,
 ) -> RobustLoop:
-    """One observer's robust certificate and its corners simulated (noise free)."""
-    box, ref = config.uncertainty, config.reference
+    """One observer's robust certificate over ``box`` (default ``[uncertainty]``; an
+    empty box is the nominal plant alone) beside the falsifier's worst case (noise free)."""
+    box = config.uncertainty if box is None else box
+    ref = config.reference
     gains = tuning.observer_gains_for(observer)
     loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
     dist = config.disturbance if config.disturbance and not config.disturbance.none else None
@@ -84,7 +91,7 @@ def _require_sound(rc, worst: float, worst_est: np.ndarray, observer: str) -> No
         ("x1 estimation", rc.estimation_bound, worst_est[0]),
         ("x3 estimation", rc.x3_estimation_bound, worst_est[2]),
     ):
-        if b is not None and w > b * (1 + 1e-9):
+        if b is not None and w > b * (1 + 1e-9):  # the bound is floored at rounding
             raise InternalError(
                 f"the {observer} robust certificate's {what} bound {b:.6g} is below a case "
                 f"the falsifier found ({w:.6g}): the certificate is wrong"
@@ -97,11 +104,21 @@ def robust_study(config: StageConfig, tuning: DigitalTuning, udot_max: float) ->
     The certified bounds are noise free (``noise_max = 0``) and so is the vertex
     simulation, so the two compare the same loops.
     """
-    loops = tuple(robust_loop(config, tuning, udot_max, obs) for obs in ROBUST_OBSERVERS)
+    box = config.uncertainty
+    has_box = box is not None and not box.undetermined()
+    loops = (
+        tuple(robust_loop(config, tuning, udot_max, obs) for obs in ROBUST_OBSERVERS)
+        if has_box
+        else ()
+    )
     dist = config.disturbance if config.disturbance and not config.disturbance.none else None
     return RobustStudy(
         udot_max=udot_max,
-        bounds=config.uncertainty.bounds(config.plant),
+        bounds=box.bounds(config.plant) if has_box else {},
         loops=loops,
         disturbance=dist,
+        nominal=tuple(
+            robust_loop(config, tuning, udot_max, obs, UncertaintyBox.from_dict({}))
+            for obs in ROBUST_OBSERVERS
+        ),
     )
