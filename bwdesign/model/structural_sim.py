@@ -407,9 +407,10 @@ def steady_state(
 ) -> StructuralRun:
     """The periodic steady state for one period ``u`` of a periodic input.
 
-    Simulates period after period from rest (or ``x0``) until the state at the end
-    of a period is within ``tol`` (relative to the period's largest |y|, |y'|, |z|)
-    of the state at its start, and returns that last period. ``options`` go to
+    Simulates period after period from rest (or ``x0``, e.g. the state of a nearby
+    steady state) until the state at the end of a period is within ``tol`` (relative
+    to the period's largest |y|, |y'|, |z|) of the state at its start, and returns
+    that last period. ``options`` go to
     :func:`simulate_structural` (``periodic`` is implied).
 
     Raises
@@ -423,7 +424,7 @@ def steady_state(
         run = simulate_structural(params, u, dt, x0=x, **options)
         scale = np.array([np.max(np.abs(a)) for a in (run.y, run.v, run.z)])
         start = np.array([run.y[0], run.v[0], run.z[0]])
-        if period > 1 and np.all(np.abs(run.state - start) <= tol * np.maximum(scale, 1e-300)):
+        if np.all(np.abs(run.state - start) <= tol * np.maximum(scale, 1e-300)):
             return StructuralRun(
                 run.y, run.v, run.z, run.state, run.upsample, run.error_estimate, periods=period
             )
