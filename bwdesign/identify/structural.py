@@ -83,6 +83,11 @@ class StructuralFit:
         Wall time of the identification.
     starts : dict
         The linear and the equation-error start values.
+    traces : dict
+        ``t, u, y, y_model`` of the first training record and ``val_t, val_y,
+        val_y_model`` of the first validation record (the report's figures).
+    dt : float
+        Sample time of the first training record (s).
     """
 
     params: StructuralParams
@@ -98,6 +103,8 @@ class StructuralFit:
     seconds: float
     periodic: bool
     starts: dict[str, Any] = field(default_factory=dict)
+    traces: dict[str, np.ndarray] = field(default_factory=dict)
+    dt: float = 0.0
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -370,12 +377,16 @@ def _result(sol, r, fun, lin, eq, validation, start) -> StructuralFit:
         else:
             ci[n] = (values[n] - Z95 * std[n], values[n] + Z95 * std[n])
     ys = np.concatenate(fun.ys)
+    first = fun.records[0]
+    traces = {"t": first.t, "u": first.u, "y": first.y, "y_model": fun.ys[0] + r[: first.n]}
     valid = []
     for data in validation or ():
         s = score_record(p, data, periodic=fun.periodic)
         valid.append(
             {"source": data.source, "fit_percent": s.fit_percent, "rms_error": s.rms_error}
         )
+        if len(valid) == 1:
+            traces.update(val_t=data.t, val_y=data.y, val_y_model=s.y_model)
     v_rms = float(np.sqrt(np.mean([v["rms_error"] ** 2 for v in valid]))) if valid else None
     converged = bool(sol.status > 0)
     return StructuralFit(
@@ -398,6 +409,8 @@ def _result(sol, r, fun, lin, eq, validation, start) -> StructuralFit:
             "linear": lin,
             "equation_error": dict(zip(DETERMINED, map(float, eq), strict=True)),
         },
+        traces=traces,
+        dt=first.dt,
     )
 
 
