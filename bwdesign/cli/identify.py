@@ -62,8 +62,8 @@ def identify_args(p: argparse.ArgumentParser) -> None:
         "--form",
         choices=("piezo", "structural"),
         default="piezo",
-        help='model form: piezo (default) or structural (README.md, section "The structural '
-        'Bouc-Wen form")',
+        help="model form: piezo (default) or structural "
+        '(README.md, section "The structural Bouc-Wen form")',
     )
     p.add_argument(
         "--periodic",

@@ -428,8 +428,8 @@ def require_form(config: StageConfig, forms: tuple[str, ...], source: str = "") 
         raise ConfigError(
             f'{where}[plant] form = "structural" (the structural Bouc-Wen form) is not '
             f"supported by this command; it is supported by bwdesign "
-            f'{", ".join(STRUCTURAL_COMMANDS)} (README.md, section "The structural Bouc-Wen '
-            f'form")'
+            f"{', '.join(STRUCTURAL_COMMANDS)} "
+            '(README.md, section "The structural Bouc-Wen form")'
         )
     raise ConfigError(f"{where}[plant] form = {form!r} is not supported by this command")
 
