@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
+from bwdesign import preset
 from bwdesign.cli.main import main
-from bwdesign.errors import ConfigError, ParameterError, UnboundedModelError
+from bwdesign.errors import ConfigError, InputError, ParameterError, UnboundedModelError
 from bwdesign.identify.hysteretic_benchmark import benchmark_records
 from bwdesign.identify.structural import DETERMINED, identify_structural
 from bwdesign.model.config import load_config, parse_config
@@ -23,6 +24,7 @@ from bwdesign.model.structural_sim import (
     simulate_structural,
     steady_state,
 )
+from bwdesign.observers.structural import StructuralObserver, structural_gains
 
 TRUE = {
     "m": 2.0,
@@ -342,3 +344,41 @@ def test_identify_structural_without_validation_nonperiodic(records):
     assert fit.converged
     for name in DETERMINED:
         assert fit.values[name] == pytest.approx(TRUE[name], rel=1e-3), name
+
+
+# -- the observer (no certificate) ---------------------------------------------------------------
+def test_observer_poles_are_where_asked():
+    from bwdesign.observers.structural import _linear_model
+
+    dt = 1 / 750.0
+    K = structural_gains(BENCHMARK, dt, 20.0)
+    f = _linear_model(BENCHMARK, dt)
+    eig = np.sort(np.abs(np.linalg.eigvals((np.eye(3) - np.outer(K, [1.0, 0, 0])) @ f)))
+    r = np.exp(-2 * np.pi * 20.0 * dt)
+    assert np.allclose(eig, np.sort([r, 0.9 * r, 0.8 * r]), rtol=1e-9)
+
+
+def test_observer_tracks_z_from_a_wrong_start(records):
+    recs, _ = records
+    for key, bound in (("valid_multisine", 1e-3), ("train", 2e-2)):  # noise free, 8e-6 m noise
+        rec = recs[key]
+        truth = steady_state(BENCHMARK, rec.u, rec.dt, upsample=16)
+        obs = StructuralObserver(BENCHMARK, rec.dt)
+        obs.reset([1e-3, 0.0, 0.0])
+        xs = obs.batch_filter(rec.y, rec.u)
+        assert abs(xs[0, 2] - truth.z[0]) > 10.0  # it starts wrong
+        tail = slice(2000, None)
+        err = np.sqrt(np.mean((xs[tail, 2] - truth.z[tail]) ** 2))
+        assert err <= bound * np.sqrt(np.mean(truth.z**2)), key
+
+
+def test_observer_refuses_bad_input():
+    with pytest.raises(InputError, match="StructuralParams"):
+        StructuralObserver(preset("paper_experiment"), 1e-3)
+    obs = StructuralObserver(BENCHMARK, 1 / 750.0)
+    with pytest.raises(InputError):
+        obs.predict(float("nan"))
+    obs.predict(1.0)
+    before = obs.x.copy()
+    obs.update(None)  # a missing sample: no correction
+    assert np.array_equal(obs.x, before)
