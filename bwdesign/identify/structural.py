@@ -358,6 +358,8 @@ def identify_structural(
     ------
     InputError
         No records, or records without a mass-spring frequency response.
+    SolverError
+        The model simulates from no start.
     """
     from scipy.optimize import least_squares
 
@@ -369,21 +371,22 @@ def identify_structural(
     say(f"linear part: m {lin['m']:.4g}, c_eq {lin['c_eq']:.4g}, k + alpha {lin['K']:.4g}")
     # the equation-error candidates, then the linear fit with a mild hysteresis (k = alpha
     # = K/2, beta_gamma y_rms = 0.5: class I, it always simulates) when none does or fits
-    y_rms = float(np.sqrt(np.mean(np.concatenate([d.y - np.mean(d.y) for d in records]) ** 2)))
-    c_eq, half = max(lin["c_eq"], 1e-9 * lin["K"]), lin["K"] / 2
-    linear = np.array([lin["m"], c_eq, half, half, 0.5 / y_rms, 0.0])
-    cands = [*equation_error_start(records, periodic, lin)[:MAX_STARTS], linear]
     scale_y = float(np.sqrt(np.mean(np.concatenate([d.y - np.mean(d.y) for d in records]) ** 2)))
+    c_eq, half = max(lin["c_eq"], 1e-9 * lin["K"]), lin["K"] / 2
+    eq_starts = equation_error_start(records, periodic, lin)[:MAX_STARTS]
+    cands = [(f"equation-error start {i + 1}", c) for i, c in enumerate(eq_starts)]
+    cands.append(("linear start", np.array([lin["m"], c_eq, half, half, 0.5 / scale_y, 0.0])))
     fun = _OutputError(list(records), periodic, scale_y, name, units)
+    ys = np.concatenate(fun.ys)
     best = None
-    for i, eq in enumerate(cands):
+    for label, eq in cands:
         shown = ", ".join(f"{n} {v:.4g}" for n, v in zip(DETERMINED, eq, strict=True))
         q0 = np.concatenate([np.log(eq[:4]), eq[4:] * scale_y])
         fun(q0)
         if fun.failed:
-            say(f"equation-error start {i + 1} ({shown}) does not simulate: next")
+            say(f"{label} ({shown}) does not simulate: next")
             continue
-        say(f"equation-error start {i + 1}: {shown}")
+        say(f"{label}: {shown}")
         sol = least_squares(
             fun,
             q0,
@@ -396,11 +399,10 @@ def identify_structural(
             max_nfev=max_nfev,
         )
         r = fun(sol.x)
-        good = not fun.failed and fit_percent(np.concatenate(fun.ys), np.concatenate(fun.ys) + r)
         say(f"output error: {sol.nfev} evaluations, residual RMS {np.sqrt(np.mean(r**2)):.3g}")
         if best is None or float(r @ r) < float(best[1] @ best[1]):
             best = (sol, r, eq, not fun.failed)
-        if good and good >= GOOD_FIT:
+        if not fun.failed and fit_percent(ys, ys + r) >= GOOD_FIT:
             break
     if best is None:
         raise SolverError(
