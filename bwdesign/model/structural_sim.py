@@ -5,8 +5,9 @@ of the displacement at ``t_k = k dt`` (point samples, as the hysteretic benchmar
 records are; not the piezo form's zero-order hold). Between samples the input is
 the band-limited (Fourier) interpolant of its samples (:func:`band_limited`): exact
 for a periodic record (one period, ``periodic=True``) of an input with no content at
-or above the Nyquist frequency; a non-periodic record is extended by reflection
-first, which keeps the interpolant band limited away from the ends.
+or above the Nyquist frequency; a non-periodic record is extended by odd reflection (after
+removing the line through its end samples) first, which keeps the interpolant band
+limited away from the ends.
 
 Two integrators, each with a stated order and an error estimate:
 
@@ -87,13 +88,18 @@ def band_limited(u: np.ndarray, factor: int, *, periodic: bool) -> np.ndarray:
     """The band-limited interpolant of ``u`` at ``factor`` points per sample.
 
     Returns ``factor * N`` values at ``t = j dt / factor`` (periodic: one period) or
-    ``factor * (N - 1) + 1`` values from ``t_0`` to ``t_{N-1}`` (non-periodic: the
-    record reflected at its ends, interpolated as one period, cut back).
+    ``factor * (N - 1) + 1`` values from ``t_0`` to ``t_{N-1}`` (non-periodic: the line
+    through the two end samples plus the rest, extended oddly about both ends, so the
+    extension is continuous with its first derivative, interpolated as one period).
     """
     u = np.asarray(u, dtype=float)
-    if not periodic:
-        ext = np.concatenate([u, u[-2:0:-1]])
-        return band_limited(ext, factor, periodic=True)[: factor * (u.size - 1) + 1]
+    if not periodic:  # the line through the ends, plus the rest reflected oddly at both ends
+        n = u.size
+        line = u[0] + (u[-1] - u[0]) * np.arange(n) / (n - 1)
+        v = u - line
+        fine = band_limited(np.concatenate([v, -v[-2:0:-1]]), factor, periodic=True)
+        m = factor * (n - 1) + 1
+        return fine[:m] + u[0] + (u[-1] - u[0]) * np.arange(m) / (m - 1)
     n = u.size
     spec = np.fft.rfft(u)
     if n % 2 == 0:  # the Nyquist line is shared by +-fs/2: split it before padding
