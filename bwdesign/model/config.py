@@ -57,21 +57,7 @@ from .stage_presets import resolve_config, stage_presets, unknown_plant_message
 from .structural import StructuralParams
 from .uncertainty import DisturbanceBound, UncertaintyBox
 
-__all__ = [
-    "StageConfig",
-    "ControllerSettings",
-    "load_config",
-    "load_plant",
-    "parse_toml",
-    "plant_from_dict",
-    "require_form",
-    "FORMS",
-]
-
-#: The model forms a ``[plant]`` table names with ``form`` (the first is the default).
-FORMS = ("piezo", "structural")
-#: The commands that take a structural stage; every other one refuses it (:func:`require_form`).
-STRUCTURAL_COMMANDS = ("params", "validate", "identify --form structural")
+__all__ = ["StageConfig", "ControllerSettings", "load_config", "load_plant", "parse_toml"]
 
 _SECTIONS = {
     "plant": None,
@@ -371,6 +357,14 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
         source=source,
         sha256=sha256,
     )
+
+
+__all__ += ["plant_from_dict", "require_form", "FORMS"]
+
+#: The model forms a ``[plant]`` table names with ``form`` (the first is the default).
+FORMS = ("piezo", "structural")
+#: The commands that take a structural stage; every other one refuses it (:func:`require_form`).
+STRUCTURAL_COMMANDS = ("params", "validate", "identify --form structural")
 
 
 def plant_from_dict(table: Any) -> BoucWenParams | StructuralParams:
