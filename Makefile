@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report reports paper lint bench dist identify audit
+.PHONY: install test report reports paper lint bench benchmark dist identify audit
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -61,6 +61,12 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_sweep.py
 	$(BIN)/python benchmarks/bench_identify.py
 	$(BIN)/python benchmarks/bench_report.py
+
+# the hysteretic benchmark (Noel and Schoukens 2016) with the structural form: identification
+# time and validation RMS errors beside the published figures (SEEDS records)
+SEEDS ?= 1
+benchmark: $(STAMP)
+	$(BIN)/python benchmarks/boucwen_benchmark.py --seeds $(SEEDS)
 
 # the sdist and the wheel (the wheel built from the sdist) into dist/, checked as an index would
 dist: $(STAMP)

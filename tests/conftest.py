@@ -91,6 +91,7 @@ REPORT_DATE = "2000-01-01 00:00 UTC"
 HEAVY_MODULES = (
     "tests/test_report.py",  # 50: the shared report, a second one, the not-certified one
     "tests/test_sweep.py",  # 40: a report with [sweep] and [uncertainty]
+    "tests/test_structural.py",  # 45: the benchmark records and their identification
     "tests/test_codegen.py",  # 24
     "tests/test_testing.py",  # 20
     "tests/test_robust_reference.py",  # 19

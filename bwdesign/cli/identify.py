@@ -58,12 +58,37 @@ def identify_args(p: argparse.ArgumentParser) -> None:
         help="with --report: write into a directory holding other files (they are kept, never "
         "overwritten), as report --force",
     )
+    p.add_argument(
+        "--form",
+        choices=("piezo", "structural"),
+        default="piezo",
+        help="model form: piezo (default) or structural "
+        '(README.md, section "The structural Bouc-Wen form")',
+    )
+    p.add_argument(
+        "--periodic",
+        action="store_true",
+        help="--form structural: every record is one period of a periodic input (fitted and "
+        "scored in the periodic steady state)",
+    )
+    p.add_argument(
+        "--units",
+        default="m,N",
+        metavar="LENGTH,INPUT",
+        help="--form structural: the records' length and input units (m,N)",
+    )
     p.add_argument("--json", action="store_true", help="print one JSON document on stdout")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
 
 
 def run_identify(args: argparse.Namespace) -> int:
     """Run ``bwdesign identify``."""
+    if args.form == "structural":
+        from .identify_structural import run_identify_structural
+
+        return run_identify_structural(args)
+    if args.periodic or args.units != "m,N":
+        raise UsageError("--periodic and --units apply to --form structural only")
     out = Path(args.out)
     if out.suffix.lower() != ".toml":
         raise UsageError(f"--out must be a .toml file, got {args.out!r}")

@@ -122,6 +122,12 @@ COMMANDS: list[Command] = [
         _lazy("cli.identify", "run_identify"),
     ),
     (
+        "validate",
+        "simulate a stage file (either form) on a record's input: fit percent and RMS error",
+        _lazy("cli.validate", "validate_args"),
+        _lazy("cli.validate", "run_validate"),
+    ),
+    (
         "excite",
         "design an identification input (within amplifier range and rate limit) as CSV",
         _lazy("cli.excite", "excite_args"),

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..model.config import load_plant
+from ..model.config import FORMS, load_plant
+from ..model.structural import StructuralParams
 from ..model.summary import plant_summary
 from ..output.jsonenc import dump_json
 from .args import EXIT_OK
@@ -14,7 +15,9 @@ __all__ = ["run_params"]
 
 def run_params(args: argparse.Namespace) -> int:
     """Run ``bwdesign params`` (registered in :mod:`bwdesign.cli.main`)."""
-    params = load_plant(args.plant)
+    params = load_plant(args.plant, forms=FORMS)
+    if isinstance(params, StructuralParams):
+        return _structural(params, args.json)
     doc = plant_summary(params)
     if args.json:
         print(dump_json(doc))
@@ -46,4 +49,18 @@ def run_params(args: argparse.Namespace) -> int:
     v = doc["bounded_class"]
     print(f"bounded class: {'yes' if v['bounded'] else 'NO'}")
     print(f"  {v['reason']}")
+    return EXIT_OK
+
+
+def _structural(params: StructuralParams, as_json: bool) -> int:
+    """``bwdesign params`` for a structural stage: parameters with units and the verdict."""
+    verdict = params.bounded_class()
+    if as_json:
+        print(dump_json({"plant": params.to_dict(), "bounded_class": verdict.to_dict()}))
+        return EXIT_OK
+    print(f"plant: {params.name or '(unnamed)'} (structural Bouc-Wen form)")
+    for k, unit in params.units.items():
+        print(f"  {k:<6} = {getattr(params, k):<14.8g} {unit}")
+    print(f"bounded for every input: {'yes' if verdict.bounded else 'no'}")
+    print(f"  {verdict.reason}")
     return EXIT_OK

@@ -287,6 +287,15 @@ def _natural_jacobian(theta: np.ndarray, p: BoucWenParams) -> np.ndarray:
 # -- diagnostics ----------------------------------------------------------------
 
 
+def sandwich_covariance(
+    jac: np.ndarray, r: np.ndarray, blocks: list[slice] | None = None
+) -> tuple[np.ndarray, int]:
+    """The interval machinery of :func:`bwdesign.identify` for another model's fit: the
+    Newey-West sandwich covariance of the fitted coordinates (never narrower than the
+    white-noise one; undetermined directions infinite) and its lag."""
+    return _covariance(jac, r, blocks)
+
+
 def _monotone_runs(u: np.ndarray) -> tuple[int, float]:
     """Number of input reversals and the largest monotone excursion (V)."""
     du = np.diff(u)

@@ -4,7 +4,9 @@ One file per stage; only ``[plant]`` is required::
 
     [plant]        name, then a1, a2, a3, alpha, beta, gamma
                    or the physical m, b, k, d, alpha0, beta, gamma;
-                   optional length_unit (default "um") and input_unit (default "V")
+                   optional length_unit (default "um") and input_unit (default "V");
+                   or form = "structural" with m, c, k, alpha, beta, gamma, delta, nu
+                   (bwdesign.model.structural; then only [sampling] may follow)
     [observer]     gains = [l1, l2, l3]   (continuous-time, 1/s, 1/s^2, 1/s)
     [controller]   lambda1, lambda2, optional u_min, u_max (input unit)
     [sampling]     dt (s)
@@ -52,6 +54,7 @@ from .plant import check_sample_time
 from .references import Reference, reference_from_dict
 from .requirements import parse_requirements
 from .stage_presets import resolve_config, stage_presets, unknown_plant_message
+from .structural import StructuralParams
 from .uncertainty import DisturbanceBound, UncertaintyBox
 
 __all__ = [
@@ -122,7 +125,8 @@ class StageConfig:
 
     Attributes
     ----------
-    plant : BoucWenParams
+    plant : BoucWenParams or StructuralParams
+        The piezo form (default) or ``form = "structural"``.
     gains : tuple of 3 floats or None
         Continuous-time observer gains (l1, l2, l3).
     controller : ControllerSettings or None
@@ -151,7 +155,7 @@ class StageConfig:
         Hash of the file's bytes, for reproducibility blocks.
     """
 
-    plant: BoucWenParams
+    plant: BoucWenParams | StructuralParams
     gains: tuple[float, float, float] | None = None
     controller: ControllerSettings | None = None
     dt: float | None = None
@@ -294,9 +298,11 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     if "plant" not in data:
         raise ConfigError(f"{source or 'config'}: missing required section [plant]")
     try:
-        plant = BoucWenParams.from_dict(data["plant"])
+        plant = plant_from_dict(data["plant"])
     except ParameterError as err:
         raise ConfigError(str(err)) from None
+    if isinstance(plant, StructuralParams):
+        return _structural_config(plant, data, source=source, sha256=sha256)
 
     gains = None
     if "observer" in data:
@@ -401,6 +407,75 @@ def parse_config(data: dict[str, Any], *, source: str = "", sha256: str = "") ->
     )
 
 
+__all__ += ["plant_from_dict", "require_form", "FORMS"]
+
+#: The model forms a ``[plant]`` table names with ``form`` (the first is the default).
+FORMS = ("piezo", "structural")
+#: The commands that take a structural stage; every other one refuses it (:func:`require_form`).
+STRUCTURAL_COMMANDS = ("params", "validate", "identify --form structural")
+
+
+def plant_from_dict(table: Any) -> BoucWenParams | StructuralParams:
+    """A ``[plant]`` table in either form: ``form = "piezo"`` (the default) or ``"structural"``.
+
+    Raises
+    ------
+    ParameterError
+        An unknown form, and every check of the form's parameters.
+    """
+    form = table.get("form", FORMS[0]) if isinstance(table, dict) else FORMS[0]
+    if form not in FORMS:
+        raise ParameterError(
+            f"[plant] form must be one of {', '.join(repr(f) for f in FORMS)}, got {form!r}",
+            field="form",
+        )
+    if form == "structural":
+        return StructuralParams.from_dict(table)
+    return BoucWenParams.from_dict({k: v for k, v in table.items() if k != "form"})
+
+
+def _structural_config(
+    plant: StructuralParams, data: dict[str, Any], *, source: str, sha256: str
+) -> StageConfig:
+    """A structural stage: ``[plant]`` and an optional ``[sampling]`` dt, nothing else."""
+    other = sorted(set(data) - {"plant", "sampling"})
+    if other:
+        raise ConfigError(
+            f'[plant] form = "structural" takes only [sampling] beside it; the structural '
+            f"Bouc-Wen form has no observer, controller or certificate sections yet, got "
+            f"{', '.join('[' + o + ']' for o in other)}"
+        )
+    dt = None
+    if "sampling" in data:
+        s = _check_keys(data["sampling"], "sampling", _SECTIONS["sampling"])
+        if "dt" not in s:
+            raise ConfigError("[sampling]: missing key dt (s)")
+        dt = _num(s["dt"], "[sampling] dt", positive=True, within=DT)
+    return StageConfig(plant=plant, dt=dt, source=source, sha256=sha256)
+
+
+def require_form(config: StageConfig, forms: tuple[str, ...], source: str = "") -> StageConfig:
+    """``config`` if its plant's form is in ``forms``, else the one refusal every command gives.
+
+    Raises
+    ------
+    ConfigError
+        Names the form and the commands that take it.
+    """
+    form = getattr(config.plant, "form", FORMS[0])
+    if form in forms:
+        return config
+    where = f"{source}: " if source else ""
+    if form == "structural":
+        raise ConfigError(
+            f'{where}[plant] form = "structural" (the structural Bouc-Wen form) is not '
+            f"supported by this command; it is supported by bwdesign "
+            f"{', '.join(STRUCTURAL_COMMANDS)} "
+            '(README.md, section "The structural Bouc-Wen form")'
+        )
+    raise ConfigError(f"{where}[plant] form = {form!r} is not supported by this command")
+
+
 def _uncertainty(table: Any) -> tuple[UncertaintyBox | None, DisturbanceBound | None]:
     """``[uncertainty]`` (None when absent or when it lists no parameter) and its
     ``[uncertainty.disturbance]`` (None when absent)."""
@@ -435,8 +510,13 @@ def parse_toml(raw: bytes, where: str) -> dict[str, Any]:
         ) from None
 
 
-def load_config(path: str | Path) -> StageConfig:
+def load_config(path: str | Path, *, forms: tuple[str, ...] = FORMS[:1]) -> StageConfig:
     """Read and validate a stage configuration file.
+
+    ``forms``: the model forms the caller takes (:data:`FORMS`); a stage of another
+    form is refused with one :class:`~bwdesign.errors.ConfigError` naming it
+    (:func:`require_form`). The default takes the piezo form only, so every command
+    written for it refuses a structural stage.
 
     ``path`` may also name a bundled stage configuration (``paper_experiment``,
     see :func:`bwdesign.stage_presets`); a path that exists wins.
@@ -467,19 +547,22 @@ def load_config(path: str | Path) -> StageConfig:
         raise ConfigError(f"cannot read config file {str(path)!r}: {err.strerror}") from None
     data = parse_toml(raw, str(path))
     try:
-        return parse_config(data, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
+        config = parse_config(data, source=str(path), sha256=hashlib.sha256(raw).hexdigest())
+        return require_form(config, forms)
     except BWDesignError as err:
         text = str(err)  # name the file once, whether or not the message already does
         raise ConfigError(text if text.startswith(f"{path}: ") else f"{path}: {text}") from None
 
 
-def load_plant(name_or_path: str | Path) -> BoucWenParams:
+def load_plant(
+    name_or_path: str | Path, *, forms: tuple[str, ...] = FORMS[:1]
+) -> BoucWenParams | StructuralParams:
     """A plant by preset name (``paper_experiment``, ...) or from a TOML file.
 
     A string that is a preset name gives the preset; anything else is read as a
     configuration file (or a bundled stage configuration by name, see
     :func:`bwdesign.stage_presets`) and its ``[plant]`` section returned (the
-    whole file is validated).
+    whole file is validated). ``forms`` as for :func:`load_config`.
 
     Examples
     --------
@@ -493,4 +576,4 @@ def load_plant(name_or_path: str | Path) -> BoucWenParams:
         p.suffix.lower() != ".toml" and not p.exists() and str(p) not in stage_presets()
     ):
         raise ConfigError(unknown_plant_message(str(name_or_path)))
-    return load_config(p).plant
+    return load_config(p, forms=forms).plant
