@@ -47,9 +47,7 @@ def test_a_part_not_asked_is_none_and_says_so():
     )
     assert s.loop.gains == config.gains and s.loop.sampled.dt == config.dt
     assert s.synthesis is None and s.tracking is None
-    with pytest.raises(
-        InputError, match=r"did not compute the part 'synthesis' \(computed: loop"
-    ):
+    with pytest.raises(InputError, match=r"did not compute the part 'synthesis' \(computed: loop"):
         s.get("synthesis")
     with pytest.raises(InputError, match="unknown study part"):
         study(config, parts={"plots"})
