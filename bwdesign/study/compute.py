@@ -300,6 +300,8 @@ def _robust(r: _Run) -> Any:
     box = r.config.uncertainty
     tuning = r["tuning"]
     if box is None or box.undetermined():
+        if not r.params.bounded_class().bounded:  # (--allow-unbounded): nothing to certify
+            return None
         r.say("certificate of the nominal loop")
         try:  # a stage without a box: the nominal certificate alone, where it applies
             return robust_study(r.config, tuning, r.udot_max)
