@@ -765,6 +765,7 @@ def _conclude(
             "dt": dt,
             "input_step_bound": step,
             "bound_method": method,
+            "rounding_floor": floor,
             # the envelope shown by the certificate itself (a fixed point), or assumed
             "rate_proved": bool(holds and step is not None and step <= udot_max * dt),
             "rate_margin": (udot_max * dt / step) if holds and step else None,

@@ -117,6 +117,10 @@ def _rows(loops, lu: str, tag: str = "") -> list[list[str]]:
             (f"max |x1hat - x1| ({lu})", rc.estimation_bound, est[0]),
             (f"max |x3hat - x3| ({lu})", rc.x3_estimation_bound, est[2]),
         ):
+            floor = rc.details.get("rounding_floor")
+            if b is not None and floor is not None and b <= floor:  # nothing to compare
+                rows.append([name, what, f"≤ {floor:.2g} (rounding)", _cell(w), "—"])
+                continue
             ratio = b / w if rc.holds and b is not None and w > 0 else None
             rows.append([name, what, _cell(b), _cell(w), _cell(ratio)])
     return rows
