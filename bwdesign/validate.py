@@ -28,6 +28,7 @@ from typing import Any
 from .errors import BWDesignError, InputError, ParameterError
 
 __all__ = [
+    "input_limits",
     "Range",
     "real",
     "integer",
@@ -241,3 +242,22 @@ SIGNAL = Range(-1e9, 1e9)
 POSITIVE = Range(0.0, math.inf, lo_open=True)
 #: Any finite number >= 0 (counts, noise levels), for quantities with no narrower range.
 NONNEGATIVE = Range(0.0, math.inf)
+
+
+def input_limits(u_limits: Any) -> tuple[float, float] | None:
+    """``(u_min, u_max)`` of a controller's input limits (V), or ``None`` for none.
+
+    Raises
+    ------
+    InputError
+        Not a pair of numbers, a NaN, or ``u_min >= u_max``.
+    """
+    if u_limits is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in u_limits)
+    except (TypeError, ValueError):
+        raise InputError(f"u_limits must be a pair (u_min, u_max) in V, got {u_limits!r}") from None
+    if math.isnan(lo) or math.isnan(hi) or not lo < hi:
+        raise InputError(f"u_limits must satisfy u_min < u_max, got ({lo}, {hi})")
+    return (lo, hi)

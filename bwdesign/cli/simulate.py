@@ -402,9 +402,17 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
             integral_rate=args.integral_rate, u_limits=u_limits,
         )  # fmt: skip
     ukf = args.observer == "ukf"
+    observer = ObserverSpec.of(args.observer, None if ukf else args.gains, udot_max=args.udot_max)
+    return _request(args, stage, (params, observer, controller), (reference, true_params), tuning)
+
+
+def _request(args, stage: Stage, parts: tuple, run: tuple, tuning, **extra) -> SimulateRequest:
+    """The request of one run: the loop of ``parts = (params, observer or None,
+    controller)`` on ``run = (reference, true_params)`` with the run's options."""
+    params, observer, controller = parts
     loop = ClosedLoop(
         params,
-        ObserverSpec.of(args.observer, None if ukf else args.gains, udot_max=args.udot_max),
+        observer,
         controller,
         dt=args.dt,
         delay=args.delay,
@@ -414,15 +422,16 @@ def simulate_request(namespace: argparse.Namespace) -> SimulateRequest:
     return SimulateRequest(
         stage=stage,
         loop=loop,
-        reference=reference,
+        reference=run[0],
         duration=args.duration,
-        true_params=true_params,
+        true_params=run[1],
         noise_std=args.noise_std,
         seed=args.seed,
         csv=args.csv,
         json=bool(args.json),
         tuning=tuning,
         options=dict(vars(args)),
+        **extra,
     )
 
 
@@ -472,29 +481,9 @@ def _baseline_request(args: argparse.Namespace, stage: Stage, true_params) -> Si
         u_limits=_u_limits(args.u_min, args.u_max),
         allow_unbounded=args.allow_unbounded,
     )
-    loop = ClosedLoop(
-        params,
-        None,
-        controller,
-        dt=args.dt,
-        delay=args.delay,
-        start=ON_REFERENCE if args.start_on_reference else Start(),
-        allow_unbounded=args.allow_unbounded,
-    )
-    return SimulateRequest(
-        stage=stage,
-        loop=loop,
-        reference=reference,
-        duration=args.duration,
-        true_params=true_params,
-        noise_std=args.noise_std,
-        seed=args.seed,
-        csv=args.csv,
-        json=bool(args.json),
-        tuning=controller.tuning,
-        options=dict(vars(args)),
-        analysis=analyze_baseline(controller, params, delay=args.delay),
-    )
+    analysis = analyze_baseline(controller, params, delay=args.delay)
+    parts, run = (params, None, controller), (reference, true_params)
+    return _request(args, stage, parts, run, controller.tuning, analysis=analysis)
 
 
 def _check_samples(duration: float, dt: float) -> None:

@@ -50,7 +50,7 @@ from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.prandtl import PrandtlIshlinskii
 from ..model.references import Reference
-from ..validate import NONNEGATIVE, POSITIVE, real
+from ..validate import NONNEGATIVE, POSITIVE, input_limits, real
 
 __all__ = [
     "BaselineController",
@@ -168,18 +168,6 @@ class _Constants:
     __slots__ = ("kp", "ki", "da", "db", "dt", "lo", "hi")
 
 
-def _u_limits(u_limits: Any) -> tuple[float, float] | None:
-    if u_limits is None:
-        return None
-    try:
-        lo, hi = (float(v) for v in u_limits)
-    except (TypeError, ValueError):
-        raise InputError(f"u_limits must be a pair (u_min, u_max) in V, got {u_limits!r}") from None
-    if math.isnan(lo) or math.isnan(hi) or not lo < hi:
-        raise InputError(f"u_limits must satisfy u_min < u_max, got ({lo}, {hi})")
-    return (lo, hi)
-
-
 class BaselineController:
     """PI or PID on the measured output, with an optional hysteresis feedforward.
 
@@ -234,7 +222,7 @@ class BaselineController:
         if self.kd > 0 and tf is None:
             raise GainError("a derivative gain kd > 0 needs the filter time constant tf (s)")
         self.tf = None if tf is None else real(tf, "tf (s)", within=POSITIVE, error=GainError)
-        self.u_limits = _u_limits(u_limits)
+        self.u_limits = input_limits(u_limits)
         if feedforward is not None and not isinstance(
             feedforward, InverseBoucWenFeedforward | PrandtlFeedforward
         ):

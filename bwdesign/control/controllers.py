@@ -76,7 +76,7 @@ import numpy as np
 from ..errors import GainError, InputError, TuningWarning
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt, discretize, hysteresis_increment
-from ..validate import LAMBDA, real
+from ..validate import LAMBDA, input_limits, real
 
 __all__ = [
     "TrackingController",
@@ -168,18 +168,6 @@ class ControlTerms:
 def _positive(value: Any, name: str) -> float:
     """A rate of the law (1/s) in :data:`bwdesign.validate.LAMBDA`, or ``GainError``."""
     return real(value, f"{name} (1/s)", within=LAMBDA, error=GainError)
-
-
-def _limits(u_limits: Any) -> tuple[float, float] | None:
-    if u_limits is None:
-        return None
-    try:
-        lo, hi = (float(v) for v in u_limits)
-    except (TypeError, ValueError):
-        raise InputError(f"u_limits must be a pair (u_min, u_max) in V, got {u_limits!r}") from None
-    if math.isnan(lo) or math.isnan(hi) or not lo < hi:
-        raise InputError(f"u_limits must satisfy u_min < u_max, got ({lo}, {hi})")
-    return (lo, hi)
 
 
 def _estimate_limits(limits: Any) -> tuple[tuple[float, float], ...] | None:
@@ -320,7 +308,7 @@ class TrackingController:
             raise InputError(f"params must be a BoucWenParams, got {type(params).__name__}")
         self.params = params
         self.lambda1, self.lambda2 = _check_lambdas(lambda1, lambda2)
-        self.u_limits = _limits(u_limits)
+        self.u_limits = input_limits(u_limits)
         self.estimate_limits = _estimate_limits(estimate_limits)
         self.hysteresis_jump = bool(hysteresis_jump)
         self.gains = error_feedback_gains(params, self.lambda1, self.lambda2)
