@@ -217,14 +217,15 @@ def response_sups(
         # rounding of the periodic solve: e0 = zr_0 - computed, (I - A^p) e0 = z_end - z0
         e0 = np.linalg.solve(G, z_end - z0)
         V = np.einsum("pnc,pnm,pmc->pc", e0, P, e0)
-        return out.best + _margin(P, A, Lz, incr, np.sqrt(np.maximum(V, 0.0)).sum(-1))
+        root_v = np.sqrt(np.maximum(V, 0.0)).sum(-1)
+        return out.best + _row_gains(P, A, Lz, incr) * root_v[:, None]
     settle = reference.settles_at
     if settle is None:
         return None
     k_last = int(math.ceil(max(settle, 0.0) / dt)) + 3
     sig, classes = _samples(reference, dt, k_last)
     C = 1 + len(classes)
-    u0 = BM[..., :] @ sig[0]
+    u0 = BM @ sig[0]
     z0 = np.zeros((n_p, n, C))
     z0[..., 0] = np.linalg.solve(np.eye(n)[None] - A, u0[..., None])[..., 0]
     out = _Rows(Lz, LrM, incr)
@@ -232,15 +233,14 @@ def response_sups(
     # then the reference is constant: run on until the rest is negligible
     s_inf = sig[-1]
     z_inf = np.linalg.solve(np.eye(n)[None] - A, (BM @ s_inf)[..., None])[..., 0]
-    gain = _gain(P, np.concatenate([Lz, np.einsum("prn,pnm->prm", Lz, A) - Lz], axis=1))
-    g_abs, g_inc = gain[:, : Lz.shape[1]], gain[:, Lz.shape[1] :]
+    gain = _row_gains(P, A, Lz, incr)
     ran = 0
     z_at = np.zeros_like(z)
     z_at[..., 0] = z_inf  # the classes' inputs are 0 after their sample
     while True:
         e = z - z_at
         V = np.einsum("pnc,pnm,pmc->pc", e, P, e)
-        rest = np.sqrt(np.maximum(V, 0)).sum(-1)[:, None] * np.where(incr[None], g_inc, g_abs)
+        rest = np.sqrt(np.maximum(V, 0)).sum(-1)[:, None] * gain
         y_inf = np.einsum("prn,pn->pr", Lz, z_inf) + (LrM @ s_inf)[None]
         tail = np.where(incr[None], rest, np.abs(y_inf) + rest)
         if np.all(rest <= _REST * np.maximum(out.best, 1e-300)) or ran >= _MAX_SETTLE:
@@ -256,9 +256,9 @@ def _wrap(sig: np.ndarray, classes: list[np.ndarray]) -> np.ndarray:
     return np.stack([sig[0]] + [c[0] for c in classes], axis=-1)
 
 
-def _margin(P, A, Lz, incr, root_v) -> np.ndarray:
-    """What the periodic solve's rounding can add: ``|L A^k e0| <= gain sqrt(e0'Pe0)``."""
+def _row_gains(P, A, Lz, incr) -> np.ndarray:
+    """Per plant and row, ``g`` with ``|row e| <= g sqrt(e'Pe)`` for the row itself or,
+    where ``incr``, its increment ``Lz (A - I) e``: the rest of a decaying ``e``."""
     gain = _gain(P, np.concatenate([Lz, np.einsum("prn,pnm->prm", Lz, A) - Lz], axis=1))
     R = Lz.shape[1]
-    g = np.where(incr[None], gain[:, R:], gain[:, :R])
-    return g * root_v[:, None]
+    return np.where(incr[None], gain[:, R:], gain[:, :R])

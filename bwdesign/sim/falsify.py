@@ -28,7 +28,6 @@ from ..errors import InputError
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox
-from .batch import BatchResult
 from .corners import simulate_plants
 
 __all__ = ["Falsification", "falsify"]
@@ -79,7 +78,8 @@ class _Search:
         self.names = list(self.bounds)
         self.plants: list[BoucWenParams] = []
         self.how: list[str] = []
-        self.results: list[BatchResult] = []
+        self.window: tuple[float, float] = (0.0, 0.0)
+        self.samples = 0
         self.per_plant: list[tuple[float, np.ndarray, float, bool]] = []
 
     def run(self, plants: list[BoucWenParams], how: str) -> None:
@@ -96,7 +96,7 @@ class _Search:
             self.plants.append(tp)
             self.how.append(how)
             self.per_plant.append((maxe, est, rate, st))
-        self.results.append(res)
+        self.window, self.samples = tuple(res.window), res.samples
 
     def coords(self, tp: BoucWenParams) -> np.ndarray:
         return np.array(
@@ -160,7 +160,6 @@ def falsify(
             radius /= 2
     i = s.worst()
     ests = np.array([p[1] for p in s.per_plant])
-    res0 = s.results[0]
     return Falsification(
         worst_maxe=float(s.per_plant[i][0]),
         worst_estimation_maxe=tuple(float(x) for x in np.max(ests, axis=0)),
@@ -169,6 +168,6 @@ def falsify(
         found_by=s.how[i],
         plants=len(s.plants),
         stable=all(p[3] for p in s.per_plant),
-        window=tuple(res0.window),
-        samples=res0.samples,
+        window=s.window,
+        samples=s.samples,
     )
