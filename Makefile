@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.bwdesign-installed
 CONFIG ?= configs/paper_experiment.toml
 OUT    ?= reports/paper_experiment
 
-.PHONY: install test report reports paper lint bench benchmark dist identify audit
+.PHONY: install test report reports paper lint bench benchmark dist identify audit docs
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -51,8 +51,8 @@ paper: $(STAMP)
 	$(BIN)/python analysis/baselines_table.py --out reports/baselines
 
 lint: $(STAMP)
-	$(BIN)/ruff check bwdesign tests analysis benchmarks examples
-	$(BIN)/ruff format --check bwdesign tests analysis benchmarks examples
+	$(BIN)/ruff check bwdesign tests analysis benchmarks examples docs
+	$(BIN)/ruff format --check bwdesign tests analysis benchmarks examples docs
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
@@ -77,3 +77,12 @@ dist: $(STAMP)
 # seeded audit of certify/synthesize against an exact mpmath check (results in reports/audit/)
 audit: $(STAMP)
 	$(BIN)/python analysis/certify_audit.py --workers 2 --out reports/audit
+
+# the documentation site into docs/_build/html: docs/ is copied into docs/_build/src, so
+# what the build generates (API pages, the gallery run) stays under docs/_build/; warnings
+# are errors (-W --keep-going reports all of them, then fails)
+SPHINXOPTS ?= -W --keep-going -q
+docs: $(STAMP)
+	rm -rf docs/_build/src docs/_build/html docs/_build/doctrees
+	$(BIN)/python -c "import shutil; shutil.copytree('docs', 'docs/_build/src', ignore=shutil.ignore_patterns('_build', '__pycache__'))"
+	$(BIN)/python -m sphinx -b html $(SPHINXOPTS) -d docs/_build/doctrees docs/_build/src docs/_build/html

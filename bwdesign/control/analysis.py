@@ -40,7 +40,7 @@ class LoopAnalysis:
         Equivalent continuous poles (``log(z)/dt`` when sampled), 1/s.
     stable : bool
     spectral_radius : float or None
-        max |z| (sampled loops).
+        ``max |z|`` (sampled loops).
     max_real_part : float
         max Re of ``poles_s`` (1/s); for a stable loop, minus the slowest decay rate.
     gain_margin : (float, float)
@@ -235,7 +235,7 @@ class MismatchSweep:
         Relative errors (dimensionless).
     stable : ndarray of bool
     spectral_radius : ndarray
-        max |z| (sampled) or nan (continuous).
+        ``max |z|`` (sampled) or nan (continuous).
     max_real_part : ndarray
         max Re of the equivalent continuous poles (1/s).
     gain_margin_db, phase_margin : ndarray

@@ -45,7 +45,7 @@ __all__ = ["ClosedLoop", "Start", "ON_REFERENCE", "DIVERGENCE_LIMIT", "controlle
 
 #: ``start=ON_REFERENCE``: begin on the reference (:meth:`Start.on_reference`).
 ON_REFERENCE = "reference"
-#: Default: |x1|, |x3| (and estimates) above this many length units, or |x2| above
+#: Default: ``|x1|``, ``|x3|`` (and estimates) above this many length units, or ``|x2|`` above
 #: it times sqrt(a1), count as divergence.
 DIVERGENCE_LIMIT = 1e6
 _POSITIVE = Range(0.0, math.inf, lo_open=True)
@@ -131,7 +131,7 @@ class ClosedLoop:
         Initial conditions; ``"reference"`` (:data:`ON_REFERENCE`) starts on the
         reference the loop is run with.
     divergence_limit : float
-        |x1|, |x3| and their estimates above this (length unit), or |x2| above it
+        ``|x1|``, ``|x3|`` and their estimates above this (length unit), or ``|x2|`` above it
         times ``sqrt(a1)``, count as divergence.
     allow_unbounded : bool
         Accept models (and true plants) outside the bounded class.

@@ -1,6 +1,6 @@
-"""Operating envelope: the input-rate bound |u'| <= udot_max a reference needs.
+"""Operating envelope: the input-rate bound ``|u'|`` <= udot_max a reference needs.
 
-The certificates bound the hysteresis error through |u'|, so the envelope of a
+The certificates bound the hysteresis error through ``|u'|``, so the envelope of a
 stage is the largest input rate it sees. For a reference ``x_d`` it is derived
 from the *exact inverse* of the model: the input ``u_ff`` under which ``x1``
 follows ``x_d`` exactly satisfies
@@ -45,11 +45,11 @@ class Envelope:
     Attributes
     ----------
     udot_max : float
-        Bound on |u'| (V/s) used by the certificates.
+        Bound on ``|u'|`` (V/s) used by the certificates.
     source : str
         ``"given"`` (stated in the config) or ``"reference"`` (derived).
     derived : float or None
-        Hysteresis-aware inverse-model bound max |u_ff'| (V/s), before ``margin``.
+        Hysteresis-aware inverse-model bound ``max |u_ff'|`` (V/s), before ``margin``.
     leading_order : float or None
         ``|a1/a3| max |x_d'|`` (V/s).
     margin : float
@@ -163,7 +163,7 @@ def derive_envelope(
     """Derive ``udot_max`` from a reference through the exact inverse model.
 
     The inverse is run over ``periods`` periods from a zero hysteresis state and
-    the maximum |u'| is taken over the last period, after the hysteresis has
+    the maximum ``|u'|`` is taken over the last period, after the hysteresis has
     settled onto its periodic loop. For a step, over the rise (a sharp step has
     no finite rate and is refused).
 

@@ -361,6 +361,9 @@ def require_bounded(params: BoucWenParams, allow_unbounded: bool = False) -> Non
         )
 
 
+#: The paper's parameter sets by name (Section 5's identified stage, Section 4 as printed
+#: and with its sign corrected); ``--plant`` and ``load_plant`` take these names, and
+#: ``bwdesign presets`` lists them beside the bundled stage files.
 PRESETS: dict[str, BoucWenParams] = {
     "paper_experiment": BoucWenParams(
         a1=159827.5,

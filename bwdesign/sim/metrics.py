@@ -1,4 +1,4 @@
-"""Tracking metrics of the paper: MAXE, ME (mean |e|) and RMSE over a window."""
+"""Tracking metrics of the paper: MAXE, ME (mean ``|e|``) and RMSE over a window."""
 
 from __future__ import annotations
 
@@ -19,9 +19,9 @@ class Metrics:
     Attributes
     ----------
     maxe : float
-        max |e|.
+        ``max |e|``.
     me : float
-        mean |e| (the paper's "mean error").
+        mean ``|e|`` (the paper's "mean error").
     rmse : float
         sqrt(mean e^2).
     window : tuple of float

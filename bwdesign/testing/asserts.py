@@ -66,7 +66,7 @@ def assert_certified(
     gains : (l1, l2, l3), optional
         Default: the stage's ``[observer]`` gains.
     udot_max : float, optional
-        |u'| bound (V/s); default: the stage's envelope.
+        ``|u'|`` bound (V/s); default: the stage's envelope.
     dt : float, optional
         Sample time (s); default ``[sampling] dt`` (adds the sampled tier).
     tier : str, optional

@@ -1,0 +1,10 @@
+"""
+The hysteresis observer in a filterpy loop
+==========================================
+
+x
+"""
+
+import matplotlib.pyplot as plt
+
+plt.plot([1, 2])
