@@ -33,6 +33,18 @@ import bwdesign  # noqa: E402
 
 api_names.write_api_pages(HERE / "api")
 
+
+def _starter() -> None:
+    """guide/starter.toml: the file ``bwdesign init`` writes, shown by the stage-files page."""
+    from bwdesign.cli import main
+
+    target = HERE / "guide" / "starter.toml"
+    if not target.exists() and main(["init", str(target)]) != 0:
+        raise RuntimeError("bwdesign init failed")
+
+
+_starter()
+
 project = "bwdesign"
 author = "bwdesign maintainers"
 copyright = "bwdesign maintainers, MIT licence"  # noqa: A001
