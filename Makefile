@@ -51,8 +51,8 @@ paper: $(STAMP)
 	$(BIN)/python analysis/baselines_table.py --out reports/baselines
 
 lint: $(STAMP)
-	$(BIN)/ruff check bwdesign tests analysis benchmarks examples docs
-	$(BIN)/ruff format --check bwdesign tests analysis benchmarks examples docs
+	$(BIN)/ruff check bwdesign tests analysis benchmarks examples docs/conf.py docs/api_names.py
+	$(BIN)/ruff format --check bwdesign tests analysis benchmarks examples docs/conf.py docs/api_names.py
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_observers.py
