@@ -293,7 +293,7 @@ def test_citation_problems_are_caught(text, found):
 def test_valid_citations_pass():
     good = (
         'docs/design.md, section "Exact sampling"; (`docs/design.md`, section "The\n'
-        '    sample clock"); docs/design.md#the-model; README.md, section "Layout"'
+        '    sample clock"); docs/design.md#the-model; docs/guide/layout.md, section "Layout"'
     )
     assert citation_problems("bwdesign/example.py", good) == []
     assert outside_citations("bwdesign/example.py", good) == []

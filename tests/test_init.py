@@ -121,10 +121,10 @@ def test_an_unknown_plant_lists_every_preset(capsys):
     assert "stack_actuator_800hz" in err and "paper_simulation," in err
 
 
-def test_the_readme_presets_table_is_the_catalogue():
-    """The README's table names every preset the command line takes, and no other."""
-    text = (ROOT / "README.md").read_text()
-    table = text[text.index("\nPresets:\n") :].split("\n\n")[1]
+def test_the_docs_presets_table_is_the_catalogue():
+    """The stage-files page's table names every preset the command line takes, and no other."""
+    text = (ROOT / "docs/guide/stage-files.md").read_text()
+    table = text[text.index("\n## Presets\n") :].split("\n\n")[2]
     rows = [ln.split("|")[1].strip().strip("`") for ln in table.splitlines()[2:]]
     assert rows == [e.name for e in preset_catalogue()]
     row = next(ln for ln in table.splitlines() if ln.startswith("| `paper_simulation` "))

@@ -1,7 +1,7 @@
 """The package layout stays true: one direction of imports, heavy libraries in one place each.
 
 Parses every module's imports with ``ast`` (imports inside functions count)
-and checks the rules the README's "Layout" section states.
+and checks the rules docs/guide/layout.md, section "Layout" states.
 """
 
 from __future__ import annotations

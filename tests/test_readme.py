@@ -1,4 +1,8 @@
-"""The README's Python examples run as written (each ```python block on its own)."""
+"""The Python examples of the README and of the documentation pages run as written.
+
+Each ```python block of ``README.md`` and of the Markdown pages under ``docs/`` runs on
+its own, in an empty folder.
+"""
 
 from __future__ import annotations
 
@@ -9,20 +13,29 @@ import pytest
 
 from bwdesign.errors import MissingExtraError
 
-README = Path(__file__).resolve().parents[1] / "README.md"
-BLOCKS = re.findall(r"^```python\n(.*?)^```", README.read_text(), flags=re.S | re.M)
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+PAGES = [README] + sorted(
+    p for p in (ROOT / "docs").rglob("*.md") if "_build" not in p.relative_to(ROOT).parts
+)
+FENCE = re.compile(r"^```python\n(.*?)^```", flags=re.S | re.M)
+BLOCKS = [(page, code) for page in PAGES for code in FENCE.findall(page.read_text())]
+IDS = [f"{page.relative_to(ROOT)}:block{i + 1}" for i, (page, _) in enumerate(BLOCKS)]
 
 
-def test_the_readme_has_python_examples():
-    assert len(BLOCKS) >= 2
-    assert any("ClosedLoop(" in b and "simulate(" in b for b in BLOCKS)
+def test_the_readme_and_docs_have_python_examples():
+    readme = [code for page, code in BLOCKS if page == README]
+    assert readme and any("ClosedLoop(" in b and "simulate(" in b for b in readme)
+    docs = [code for page, code in BLOCKS if page != README]
+    assert len(docs) >= 3
+    assert any("ClosedLoop(" in b and "simulate_batch(" in b for b in docs)
 
 
-@pytest.mark.parametrize("code", BLOCKS, ids=[f"block{i + 1}" for i in range(len(BLOCKS))])
-def test_readme_python_block_runs(code, tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("page, code", BLOCKS, ids=IDS)
+def test_python_block_runs(page, code, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)  # whatever an example writes lands here
     try:
-        exec(compile(code, str(README), "exec"), {"__name__": "readme_example"})
+        exec(compile(code, str(page), "exec"), {"__name__": "readme_example"})
     except MissingExtraError as err:  # an optional extra that is not installed
         pytest.skip(str(err))
     out = capsys.readouterr().out.splitlines()

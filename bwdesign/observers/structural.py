@@ -16,8 +16,8 @@ with ``F`` the zero-order-hold model linearised at z = 0 (hysteresis slope alpha
 No certificate: the hysteresis error of this form is driven by the *estimated*
 velocity (``z' - zhat' = alpha e_v - beta gamma (|y'| z - |yhat'| zhat) - ...``), not
 by a known input rate as in the piezo form, so the sector and sampled tiers
-(docs/design.md, section "Certificates") do not apply; the README (section "The
-structural Bouc-Wen form") says so and no command takes a structural stage's gains.
+(docs/design.md, section "Certificates") do not apply; docs/guide/structural.md,
+section "The structural Bouc-Wen form" says so and no command takes a structural stage's gains.
 """
 
 from __future__ import annotations
