@@ -20,6 +20,7 @@ __all__ = ["EXTRAS", "require"]
 EXTRAS: dict[str, tuple[str, ...]] = {
     "sweep": ("dask", "distributed", "pyarrow", "tqdm"),
     "browser": ("selenium",),
+    "docs": ("sphinx", "numpydoc", "sphinx_gallery", "myst_parser", "furo"),
 }
 
 
