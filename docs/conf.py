@@ -36,11 +36,18 @@ api_names.write_api_pages(HERE / "api")
 
 def _starter() -> None:
     """guide/starter.toml: the file ``bwdesign init`` writes, shown by the stage-files page."""
+    import contextlib
+    import io
+
     from bwdesign.cli import main
 
     target = HERE / "guide" / "starter.toml"
-    if not target.exists() and main(["init", str(target)]) != 0:
-        raise RuntimeError("bwdesign init failed")
+    if target.exists():
+        return
+    with contextlib.redirect_stdout(io.StringIO()) as said:
+        code = main(["init", str(target)])
+    if code != 0:
+        raise RuntimeError(f"bwdesign init failed ({code}): {said.getvalue()}")
 
 
 _starter()

@@ -29,7 +29,8 @@ p = load_plant("paper_experiment")
 dt = 2e-4
 ref = Sine(amplitude=80, offset=100, frequency=1)
 tuning = digital_tuning(p, dt)
-print(f"digital tuning: lambda = ({tuning.lambda1:g}, {tuning.lambda2:g}), gains {tuning.gains}")
+print(f"digital tuning: lambda = ({tuning.lambda1:g}, {tuning.lambda2:g})")
+print(f"observer gains {np.round(tuning.gains, 2)}")
 settings = tuning.controller_kwargs()  # gains, lambda1, lambda2, form, integral_rate
 settings.pop("gains")
 law = make_controller(p, dt=dt, **settings)
@@ -55,3 +56,10 @@ ax.set_xlabel("t (s)")
 ax.set_ylabel("tracking error x1 - x_d (um)")
 ax.legend()
 fig.tight_layout()
+
+# %%
+# With a1 high and a3 low the PHSO loop zig-zags at half the sample rate (its model's
+# hysteresis absorbs the linear mismatch it cannot see); the PHDO's disturbance state
+# takes the mismatch instead, and its error stays within a tenth of a micrometre on
+# every plant above. The robust certificates (user guide, "Robust certificates over an
+# uncertainty box") bound this over a whole box.
