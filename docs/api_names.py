@@ -11,6 +11,7 @@ Run ``python docs/api_names.py`` for the counts.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import inspect
 import pkgutil
@@ -20,10 +21,18 @@ from pathlib import Path
 
 #: Subpackages that are not a library API: the command line has one entry point.
 NOT_API = {"bwdesign.cli", "bwdesign.__main__"}
+#: Modules documented beside the subpackages: the Python side of a command the guide
+#: shows (``bwdesign sweep``, ``bwdesign excite``), whose names their package does not
+#: re-export.
+EXTRA_MODULES = ("bwdesign.sim.sweep", "bwdesign.identify.excite")
 
 
 def api_modules() -> list[str]:
-    """``bwdesign`` and every subpackage with an ``__all__``, top-level first."""
+    """``bwdesign``, every subpackage with an ``__all__`` and :data:`EXTRA_MODULES`.
+
+    The rest of a module's contents may change (``bwdesign/__init__.py``: the public
+    API is what the packages re-export), so the reference leaves them out.
+    """
     import bwdesign
 
     names = ["bwdesign"]
@@ -31,7 +40,7 @@ def api_modules() -> list[str]:
         if m.ispkg and m.name not in NOT_API:
             if getattr(importlib.import_module(m.name), "__all__", None):
                 names.append(m.name)
-    return names
+    return names + list(EXTRA_MODULES)
 
 
 def public_names() -> dict[str, list[str]]:
@@ -61,6 +70,7 @@ def _is_object(obj) -> bool:
     return inspect.isclass(obj) or inspect.isroutine(obj) or inspect.ismodule(obj)
 
 
+@functools.cache
 def _attr_doc(module_name: str, name: str) -> str:
     """The ``#:`` comment (or string after it) of a module-level constant, as autodoc reads it."""
     from sphinx.pycode import ModuleAnalyzer
@@ -83,21 +93,21 @@ def documentation(module_name: str, name: str) -> str:
         return doc.strip()
     if inspect.isroutine(obj) or inspect.ismodule(obj):
         return (obj.__doc__ or "").strip()
-    # a constant: its comment where it is defined (the module that re-exports it, or below)
-    for where in _defining_modules(module_name):
-        if text := _attr_doc(where, name):
+    # a constant: its comment where it is defined (this module, or the one it came from)
+    for where in [module_name, *_all_modules()]:
+        other = importlib.import_module(where)
+        if getattr(other, name, None) is obj and (text := _attr_doc(where, name)):
             return text
     return ""
 
 
-def _defining_modules(module_name: str) -> list[str]:
-    """The module and its submodules, where a re-exported constant may be defined."""
-    mod = importlib.import_module(module_name)
-    out = [module_name]
-    if hasattr(mod, "__path__"):
-        subs = pkgutil.walk_packages(mod.__path__, module_name + ".")
-        out += [m.name for m in subs if not m.name.endswith("__main__")]
-    return out
+@functools.cache
+def _all_modules() -> tuple[str, ...]:
+    """Every module of the package but the command line's entry point."""
+    import bwdesign
+
+    found = pkgutil.walk_packages(bwdesign.__path__, "bwdesign.")
+    return tuple(m.name for m in found if not m.name.endswith("__main__"))
 
 
 def counts() -> tuple[int, list[str]]:
@@ -130,12 +140,23 @@ def write_api_pages(out: Path) -> list[str]:
         "(the names re-exported at the top level) and the ``__all__`` of each subpackage",
         "(a name that is also a top-level name is documented there once).",
         "",
+        _count_sentence(),
+        "",
         ".. toctree::",
         "   :maxdepth: 1",
         "",
     ] + [f"   {p}" for p in pages]
     (out / "index.rst").write_text("\n".join(index) + "\n", encoding="utf-8")
     return pages
+
+
+def _count_sentence() -> str:
+    """The counts as one sentence for the reference's index page."""
+    total, missing = counts()
+    text = f"This build documents {total - len(missing)} of {total} public names"
+    if missing:
+        return text + "; without documentation: " + ", ".join(f"``{m}``" for m in missing) + "."
+    return text + "; none is without documentation."
 
 
 if __name__ == "__main__":

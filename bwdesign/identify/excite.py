@@ -17,7 +17,7 @@ one full-range triangle at f0, then triangles up to a fraction of the resonance
 whose amplitude falls as the frequency rises so the rate limit holds, which puts
 harmonics through the resonance. Both span the range asked to within
 :data:`RANGE_MARGIN` (2.5 %) of each end and keep ``|du/dt| <= udot_max``
-(checked on the sampled signal, |u[k+1] - u[k]| <= udot_max dt); a rate too low
+(checked on the sampled signal, ``|u[k+1] - u[k]| <= udot_max dt``); a rate too low
 to cross the range once over the record (:func:`smallest_rate`) is refused.
 """
 
@@ -35,6 +35,7 @@ from .data import IdentificationData
 
 __all__ = ["design_excitation", "smallest_rate", "simulate_record", "KINDS", "RANGE_MARGIN"]
 
+#: The excitations :func:`design_excitation` designs (``bwdesign excite --kind``).
 KINDS = ("multisine", "triangle-sweep")
 #: Fraction of the amplifier range kept clear at each end: the input reaches to within
 #: this of ``umin`` and of ``umax``, so it spans 95 % of the range asked.

@@ -122,7 +122,7 @@ class SweepSpec:
     noise_std : float
         Sensor noise std (length unit).
     udot_max : float, optional
-        The input-rate envelope |u'| <= udot_max (input unit/s) the loop's certificate
+        The input-rate envelope ``|u'| <= udot_max`` (input unit/s) the loop's certificate
         assumed; each row then says whether its input stayed inside
         (``within_envelope``). None: rates are recorded, not compared.
     envelope_source : str
