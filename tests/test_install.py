@@ -84,7 +84,7 @@ def test_a_missing_extra_is_a_typed_error_naming_it():
     assert err.module == err.name == "bwdesign_no_such_module"
     assert "a parameter sweep needs the optional dependency" in str(err)
     assert require("json", extra="sweep", feature="x") is json
-    with pytest.raises(ValueError, match="unknown extra 'nope'; extras are browser, sweep"):
+    with pytest.raises(ValueError, match="unknown extra 'nope'; extras are browser, docs, sweep"):
         require("json", extra="nope", feature="x")
 
 
