@@ -43,3 +43,11 @@ def test_python_block_runs(page, code, tmp_path, monkeypatch, capsys):
     for stable, value in re.findall(r"print\(r\.stable, r\.metrics\.maxe\)\s+# (\w+), (\S+)", code):
         first = out[0].split()
         assert first[0] == stable and f"{float(first[1]):.3g}" == value, out[0]
+
+
+def test_the_readme_is_short_and_points_into_the_docs():
+    """The README says what the package is and where to read on (issue 31: <= 200 lines)."""
+    text = README.read_text()
+    assert len(text.splitlines()) <= 200
+    for page in ("docs/getting-started.md", "docs/guide/index.md", "docs/design.md"):
+        assert f"]({page})" in text and (ROOT / page).is_file(), page
