@@ -31,6 +31,7 @@ from bwdesign.errors import ConfigError, InputError, ParameterError
 from bwdesign.model.config import load_config
 from bwdesign.model.envelope import derive_envelope
 from bwdesign.sim.batch import hysteresis_increment_batch, simulate_batch
+from bwdesign.sim.compiled import hysteresis_jump
 from bwdesign.sim.replay import SENSITIVE_RTOL, SENSITIVITY_STEP, replay_row
 from bwdesign.sim.sweep import (
     MEMORY_CAP,
@@ -92,6 +93,9 @@ def test_hysteresis_batch_matches_scalar():
         got = hysteresis_increment_batch(p.alpha, p.beta, p.gamma, h, u0, u1)
         ref = np.array([hysteresis_increment(p, *a) for a in zip(h, u0, u1, strict=True)])
         np.testing.assert_allclose(got, ref, rtol=1e-13, atol=1e-15)
+        # the compiled jump of the batched loop (bwdesign.sim.compiled): same operations
+        jit = [hysteresis_jump(p.alpha, p.beta, p.gamma, *a) for a in zip(h, u0, u1, strict=True)]
+        np.testing.assert_allclose(jit, ref, rtol=1e-14, atol=1e-16)
 
 
 @pytest.mark.parametrize("observer", ["phso", "eso", "phdo"])

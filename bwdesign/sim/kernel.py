@@ -3,10 +3,11 @@
 :func:`correct` (the measurement update) and :func:`advance` (the law, the plant's
 ZOH step with its exact hysteresis jump, the observer's prediction and the delay)
 are plain arithmetic on the fields of a :class:`LoopState`. With Python floats they
-are :func:`bwdesign.sim.simulate`'s fast path; with numpy arrays of ``N`` scenarios
-they are :func:`bwdesign.sim.simulate_batch`. Only the element-wise helpers differ
-(:data:`SCALAR` and :data:`ARRAY`: clipping and the hysteresis increment), so every
-scenario of a batch runs the scalar loop's operations in the same order.
+are :func:`bwdesign.sim.simulate`'s fast path. :func:`bwdesign.sim.simulate_batch` runs
+the same step compiled (:mod:`bwdesign.sim.compiled`, the same operations in the same
+order, written out as scalar code). The step also runs on numpy arrays of ``N`` scenarios
+(:data:`ARRAY`: clipping and :class:`BatchHysteresis` element-wise), which
+:func:`hysteresis_increment_batch` and the tests use.
 
 Per sample ``k`` (see :mod:`bwdesign.sim`)::
 
