@@ -73,10 +73,10 @@ def _mismatched(n, seed):
 
 def test_stacked_zoh_matches_discretize():
     from bwdesign.model.plant import discretize
-    from bwdesign.sim.batch import _true_matrices
+    from bwdesign.sim.zoh import true_matrices
 
     tps = [P, preset("paper_simulation_corrected"), replace(P, a1=1e9, a2=10.0), replace(P, a2=5e4)]
-    T = _true_matrices(tps, DT)
+    T = true_matrices(tps, DT)
     for i, tp in enumerate(tps):
         z = discretize(tp, DT)
         got = [[T[f"p{r + 1}{c + 1}"][i] for c in range(3)] for r in range(2)]

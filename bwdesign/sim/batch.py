@@ -23,7 +23,6 @@ and the divergence status; a scenario's full record is replayed with
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,6 +36,7 @@ from ..observers.spec import GAIN_KINDS
 from .closed_loop import baseline_feedforward
 from .kernel import SCALAR, LoopConstants, discrete_observer_gains, hysteresis_increment_batch
 from .run import Run, disturbance_samples, diverged, prepare, resolve_window
+from .zoh import true_matrices
 
 __all__ = ["BatchResult", "simulate_batch", "hysteresis_increment_batch"]
 
@@ -63,6 +63,10 @@ class BatchResult:
     input_rate_max : ndarray
         Largest ``|u_k - u_{k-1}| / dt`` of the applied input over ``window``
         (input unit/s); NaN when unstable.
+    saturated_fraction : ndarray
+        Share of the samples whose applied input is at a ``u_limits`` bound (the run's
+        every sample, as :attr:`bwdesign.sim.SimulationResult.saturated_fraction`; a
+        diverged one's samples up to the divergence); 0 without limits.
     window : (float, float)
         Metrics window (s).
     samples : int
@@ -79,58 +83,13 @@ class BatchResult:
     estimation_rmse: np.ndarray
     estimation_maxe: np.ndarray
     input_rate_max: np.ndarray
+    saturated_fraction: np.ndarray
     window: tuple[float, float]
     samples: int
     settings: dict[str, Any] = field(repr=False)
 
     def __len__(self) -> int:
         return int(self.stable.size)
-
-
-def _zoh_batch(a1: np.ndarray, a2: np.ndarray, a3: np.ndarray, dt: float) -> np.ndarray:
-    """:func:`bwdesign.model.plant.discretize`'s augmented exponential, stacked (N, 4, 4)."""
-    w0 = np.sqrt(a1)
-    n = a1.size
-    Mz = np.zeros((n, 4, 4))
-    Mz[:, 0, 1] = w0
-    Mz[:, 1, 0] = -w0
-    Mz[:, 1, 1] = -a2
-    Mz[:, 1, 2] = -w0
-    Mz[:, 1, 3] = w0
-    D = np.stack([np.ones(n), w0, np.ones(n), a1 / a3], axis=1)
-    return D[:, :, None] * _expm_stack(Mz * dt) / D[:, None, :]
-
-
-def _expm_stack(A: np.ndarray) -> np.ndarray:
-    """``expm`` of a stack of small matrices (N, m, m): scaling and squaring with Taylor.
-
-    One vectorised pass instead of N calls of :func:`scipy.linalg.expm` (which costs
-    more than the simulation for short runs). After scaling to ``||A/2^s||_1 <= 1/2``
-    the degree-18 Taylor remainder is below ``0.5^19 / 19! ~ 2e-23``, far below
-    double rounding; the result agrees with scipy to rounding (checked in the tests).
-    """
-    norm = float(np.max(np.abs(A).sum(axis=-2))) if A.size else 0.0
-    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
-    X = A / 2.0**s
-    eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
-    E = eye.copy()
-    term = eye.copy()
-    for k in range(1, 19):
-        term = term @ X / k
-        E = E + term
-    for _ in range(s):
-        E = E @ E
-    return E
-
-
-def _true_matrices(true_params: list[BoucWenParams], dt: float) -> dict[str, np.ndarray]:
-    col = {k: np.array([getattr(tp, k) for tp in true_params]) for k in ("a1", "a2", "a3")}
-    E = _zoh_batch(col["a1"], col["a2"], col["a3"], dt)
-    out = {f"p{i + 1}{j + 1}": E[:, i, j].copy() for i in range(2) for j in range(3)}
-    out.update(g1=E[:, 0, 3].copy(), g2=E[:, 1, 3].copy(), w0=np.sqrt(col["a1"]))
-    for k in ("alpha", "beta", "gamma"):
-        out[k] = np.array([getattr(tp, k) for tp in true_params])
-    return out
 
 
 def _per_scenario(value: Any, n: int, name: str) -> np.ndarray:
@@ -233,6 +192,7 @@ def simulate_batch(
         ),
         estimation_maxe=np.where(stable[:, None], np.stack(acc["est_max"], axis=1), np.nan),
         input_rate_max=np.where(stable, acc["du_max"] / loop.dt, np.nan),
+        saturated_fraction=acc["saturated"] / np.where(stable, run.n, acc["ran"]),
         window=(float(win[0]), float(win[1])),
         samples=run.n,
         settings=settings,
@@ -282,6 +242,9 @@ def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, 
         "est_sq": [out[:, 3 + j].copy() for j in range(3)],
         "est_max": [out[:, 6 + j].copy() for j in range(3)],
         "du_max": out[:, 9].copy(),
+        "saturated": out[:, 19].copy(),
+        # a diverged scenario's samples run, up to and including the divergence
+        "ran": out[:, 11] + 1.0,
         "count": count,
         "alive": alive,
         "status": status,
@@ -300,7 +263,7 @@ def _run_batch_baseline(run: Run, in_win: np.ndarray, noise_std, seeds, dist) ->
     law = np.array([c.kp, c.ki, c.da, c.db, c.dt, c.lo, c.hi], dtype=float)
     win = np.append(in_win, False).astype(float)
     ref = np.ascontiguousarray(np.stack([np.append(ff, 0.0), xd, win]))
-    T = _true_matrices(list(run.true_params), dt)
+    T = true_matrices(list(run.true_params), dt)
     plant = _plant_rows(T, limit)
     start = run.start
     q0 = loop.controller.start(start.x0[0], start.u_prev, ff[0]).q
@@ -336,7 +299,7 @@ def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds, dist)
     )
     win = np.append(in_win, False).astype(float)
     ref = np.ascontiguousarray(np.stack([np.asarray(c.ff, dtype=float), ref3[0], win]))
-    T = _true_matrices(list(run.true_params), dt)
+    T = true_matrices(list(run.true_params), dt)
     plant = _plant_rows(T, limit)
     start = run.start
     st = np.array([*(float(v) for v in start.x0), *(float(v) for v in start.xhat0)] + [0.0])

@@ -110,7 +110,8 @@ def observer_batch(plant, consts, ref, noise, dist, out):
         Input disturbance per sample: no row (none), one row (common) or one per scenario.
     out : (N, 20)
         Written: sum_abs, sum_sq, max_abs, est_sq x3, est_max x3, du_max, alive, the step
-        of the divergence, the state there (x1, x2, x3, xhat1, xhat2, xhat_lumped, u_a).
+        of the divergence, the state there (x1, x2, x3, xhat1, xhat2, xhat_lumped, u_a),
+        the number of samples whose applied input is at an input limit.
     """
     _observer_batch(plant, *consts, ref, noise, dist, out)
 
@@ -171,6 +172,7 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
         x2m = 0.0
         x3m = 0.0
         dum = 0.0
+        sat = 0.0
         out[i, 10] = 1.0
         out[i, 11] = -1.0
         for k in range(n):
@@ -225,6 +227,8 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                     u_next, q = _law(law, lim, ff, xd, h1, h2, hw, k + 1, q)
                 ua = u_next
             up = applied
+            if applied <= law[5] or applied >= law[6]:
+                sat += 1.0
             if inw:
                 dum = max(dum, abs(applied - uprev))
             ok = (
@@ -246,6 +250,7 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
         out[i, 3], out[i, 4], out[i, 5] = e1, e2, e3
         out[i, 6], out[i, 7], out[i, 8] = x1m, x2m, x3m
         out[i, 9] = dum
+        out[i, 19] = sat
 
 
 @njit(cache=True)
@@ -290,6 +295,7 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
         sq = 0.0
         mx = 0.0
         dum = 0.0
+        sat = 0.0
         out[i, 10] = 1.0
         out[i, 11] = -1.0
         for k in range(n):
@@ -324,6 +330,8 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
             x1 = nx1
             x3 = hh
             up = applied
+            if applied <= lo or applied >= hi:
+                sat += 1.0
             if inw:
                 dum = max(dum, abs(applied - uprev))
             ok = abs(x1) <= limit and abs(x3) <= limit and abs(x2) <= vlim and abs(ua) < 1e300
@@ -335,6 +343,7 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
                 break
         out[i, 0], out[i, 1], out[i, 2] = sa, sq, mx
         out[i, 9] = dum
+        out[i, 19] = sat
 
 
 def empty_out(N: int) -> np.ndarray:
