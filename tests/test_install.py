@@ -40,7 +40,9 @@ from bwdesign.study import CERTIFICATE_PARTS, REPORT_SECTIONS, study
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
-BASE = {"numpy", "scipy", "control", "cvxpy", "filterpy", "matplotlib"}
+#: the six libraries, and numba for the batched loop's compiled step (bwdesign.sim.compiled:
+#: the report's corner batches 10-15x faster, `make bench`)
+BASE = {"numpy", "scipy", "control", "cvxpy", "filterpy", "matplotlib", "numba"}
 #: the module (``bwdesign.cli.main`` the attribute is the function it defines)
 main_mod = import_module("bwdesign.cli.main")
 STAGE_FILES = sorted(p.name for p in STAGES_DIR.glob("*.toml"))
@@ -69,7 +71,7 @@ def test_extras_match_pyproject():
     }
 
 
-def test_base_install_is_the_six_libraries():
+def test_base_install_is_the_six_libraries_and_numba():
     names = {_modules(r)[0] for r in PYPROJECT["project"]["dependencies"]}
     assert names == BASE
     # every report calls control.linfnorm, which needs slycot: control's own extra

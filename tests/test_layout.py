@@ -40,6 +40,7 @@ CONFINED = {
     "cvxpy": "bwdesign.certify.lmi",
     "matplotlib": "bwdesign.plotting",
     "dask": "bwdesign.sim.sweep",
+    "numba": "bwdesign.sim.compiled",
 }
 #: The C templates are read only by code generation.
 TEMPLATES_HOME = "bwdesign.codegen"

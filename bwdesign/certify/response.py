@@ -44,8 +44,11 @@ __all__ = ["response_sups", "MAX_PERIOD_SAMPLES"]
 MAX_PERIOD_SAMPLES = 400_000
 #: A sample this close to a breakpoint (in units of dt) may see either side of it.
 _AMBIGUOUS = 1e-6
-#: Samples run per chunk (memory: chunk x plants x states x classes).
+#: Samples run per chunk at most (memory: chunk x plants x states x classes) ...
 _CHUNK = 1024
+#: ... and at most this many values per chunk array (16 MB): a box's hundreds of plants
+#: with a triangle's classes held about 900 MB at 1024 samples a chunk
+_CHUNK_VALUES = 2_000_000
 #: Settling references: stop once the rest is below this share of the supremum.
 _REST = 1e-6
 #: ... or after this many samples beyond the last move.
@@ -132,8 +135,10 @@ def _run(A, BM, sig, classes, z0, rows: _Rows | None):
     n_s = sig.shape[0]
     S = np.stack([sig] + list(classes), axis=-1)  # (k, 9, classes)
     z = z0.copy()
-    for c0 in range(0, n_s, _CHUNK):
-        Sc = S[c0 : c0 + _CHUNK]
+    width = z0.size + (0 if rows is None else rows.Lz.shape[0] * rows.Lz.shape[1] * S.shape[-1])
+    chunk = max(16, min(_CHUNK, _CHUNK_VALUES // max(width, 1)))
+    for c0 in range(0, n_s, chunk):
+        Sc = S[c0 : c0 + chunk]
         U = np.einsum("pnj,kjc->kpnc", BM, Sc)
         Z = np.empty_like(U)
         for i in range(len(Sc)):

@@ -3,7 +3,7 @@
 Exit codes: 0 written; 1 nothing certifies the gains (nothing written unless
 ``--allow-uncertified``); 2 bad input with one ``error:`` line, nothing written.
 
-``--controller pi|pid|pi-piff`` exports a baseline instead (no observer,
+``--controller pi|pid|pi-bwff|pi-piff`` exports a baseline instead (no observer,
 :mod:`bwdesign.codegen.baselines`): with the stage's ``[baseline]`` gains when its kind
 is the one asked, else tuned by the phase-margin rule; exit 1 (files written) when its
 nominal linear loop is not stable.
@@ -40,9 +40,8 @@ def export_c_args(p: argparse.ArgumentParser) -> None:
         "--controller",
         choices=("eq12", *BASELINE_KINDS),
         default="eq12",
-        help="eq12 (default): the observers and eq. (12); pi, pid, pi-piff: that baseline "
-        "(no observer; [baseline] gains when its kind matches, else the tuning rule); "
-        "pi-bwff is not exported",
+        help="eq12 (default): the observers and eq. (12); pi, pid, pi-bwff, pi-piff: that "
+        "baseline (no observer; [baseline] gains when its kind matches, else the tuning rule)",
     )
     src = p.add_mutually_exclusive_group()
     src.add_argument(

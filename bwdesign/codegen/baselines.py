@@ -1,18 +1,17 @@
-"""Export a baseline controller (PI, PID, PI + Prandtl–Ishlinskii) as dependency-free C99.
+"""Export a baseline controller (PI, PID, PI + a hysteresis feedforward) as dependency-free C99.
 
 :func:`export_baseline_c` writes ``PREFIX.h``, ``PREFIX.c`` (the law of
 :func:`bwdesign.control.baselines.pid_step` and, for ``pi-piff``, the inverse
 Prandtl–Ishlinskii operator of :class:`~bwdesign.control.baselines.PrandtlFeedforward`,
-each with the Python operations in their order), ``harness.c`` (reads the measurement
-and the reference per sample, prints ``u_k`` with ``%.17g``) and ``export.json``. Every
-constant is a hexadecimal literal, exact in the chosen precision
-(:mod:`bwdesign.codegen.literals`). float64 reproduces the Python loop's inputs bit for
-bit; float32 within a stated fraction of the input range (``tests/test_baselines.py``).
-
-The ``pi-bwff`` baseline is not exported: its feedforward solves the exact inverse
-Bouc–Wen relation per sample with :func:`scipy.optimize.brentq`
-(:func:`bwdesign.model.envelope.feedforward_input`), whose iterates C would not
-reproduce bit for bit; export ``pi`` and feed it that feedforward.
+for ``pi-bwff`` the exact inverse Bouc–Wen model's safeguarded Newton iteration of
+:func:`bwdesign.model.inverse.inverse_step`, each with the Python operations in their
+order), ``harness.c`` (reads the measurement and the reference per sample, prints ``u_k``
+with ``%.17g``) and ``export.json``. Every constant is a hexadecimal literal, exact in the
+chosen precision (:mod:`bwdesign.codegen.literals`). float64 reproduces the Python loop's
+inputs bit for bit (the inverse's ``exp``/``expm1``/``log1p`` are the libm calls Python's
+``math`` makes); float32 within a stated fraction of the input range
+(``tests/test_baselines.py``). The float32 inverse stops its Newton iteration at
+:data:`FLOAT32_TOL` relative instead of 1e-14 (below float32's rounding).
 """
 
 from __future__ import annotations
@@ -22,32 +21,87 @@ from typing import Any
 
 from .._version import __version__
 from ..control.baseline_tuning import analyze_baseline
-from ..control.baselines import BaselineController
+from ..control.baselines import BaselineController, InverseBoucWenFeedforward, PrandtlFeedforward
 from ..control.loop import ClosedLoop
 from ..errors import ConfigError, InputError
 from ..model.config import StageConfig
+from ..model.inverse import MAX_ITER, inverse_bound
+from ..model.inverse import TOL as INVERSE_TOL
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
 from .export import CExport, check_prefix, fill
 from .literals import CTypes
 
-__all__ = ["EXPORTED_BASELINES", "baseline_c_sources", "export_baseline_c"]
+__all__ = ["EXPORTED_BASELINES", "FLOAT32_TOL", "baseline_c_sources", "export_baseline_c"]
 
 #: The baselines ``export-c --controller`` writes.
-EXPORTED_BASELINES = ("pi", "pid", "pi-piff")
+EXPORTED_BASELINES = ("pi", "pid", "pi-bwff", "pi-piff")
 _TITLES = {
     "pi": "PI on the measured output",
     "pid": "PID on the measured output (filtered derivative on the measurement)",
+    "pi-bwff": "PI on the measured output plus the exact inverse Bouc-Wen feedforward",
     "pi-piff": "PI on the measured output plus the inverse Prandtl-Ishlinskii feedforward",
 }
+#: The float32 inverse Bouc-Wen's relative Newton step tolerance: 4 float32 epsilons, above
+#: the rounding of its residual (a3 v - a1 h - r cancels to a few float32 ulps of a3 v); on
+#: paper_experiment the iteration then stops after at most 3 evaluations, as in float64.
+FLOAT32_TOL = 2.0**-21
+
+
+_HARNESS_FF = (
+    "        {{\n            const {r} v = {p}_ff_target(({r})xm, ({r})vm, ({r})am);\n"
+    "            if (first) {{\n                {p}_ff_init(&f, v);\n            }}\n"
+    "            ff = {p}_ff_step(&f, v);\n        }}"
+)
 
 
 def _ff_code(ct: CTypes, base: dict[str, str], ctrl: BaselineController) -> dict[str, str]:
     """The feedforward's prototypes, implementation and harness lines (empty without one)."""
-    p, r, lit = base["prefix"], ct.real, ct.literal
+    p, r = base["prefix"], ct.real
     if ctrl.feedforward is None:
-        return {"ff_prototypes": "", "ff_code": "", "ff_state": "", "ff_step": "        ff = 0;"}
-    ff = ctrl.feedforward
+        return {
+            "ff_prototypes": "", "ff_code": "", "ff_state": "", "ff_step": "        ff = 0;",
+            "includes": "",
+        }  # fmt: skip
+    make = _piff_code if ctrl.feedforward.kind == "piff" else _bwff_code
+    proto, code = make(ct, base, ctrl.feedforward)
+    return {
+        "ff_prototypes": proto,
+        "ff_code": code,
+        "ff_state": f"    {p}_ff f;",
+        "ff_step": _HARNESS_FF.format(p=p, r=r),
+        "includes": "#include <math.h>\n\n" if ctrl.feedforward.kind == "bwff" else "",
+    }
+
+
+def _bwff_code(ct: CTypes, base: dict[str, str], ff: InverseBoucWenFeedforward) -> tuple[str, str]:
+    """The exact inverse Bouc-Wen feedforward (:func:`bwdesign.model.inverse.inverse_step`)."""
+    p, r, lit = base["prefix"], ct.real, ct.literal
+    params = ff.params
+    proto = (
+        f"\n/* The exact inverse Bouc-Wen model: the previous input u, its last increment du and\n"
+        f" * the hysteresis state h. */\n"
+        f"typedef struct {{\n    {r} u;\n    {r} du;\n    {r} h;\n}} {p}_ff;\n\n"
+        f"/* The target r = x_d'' + a2 x_d' + a1 x_d of the reference triple. */\n"
+        f"{r} {p}_ff_target({r} xm, {r} vm, {r} am);\n"
+        f"void {p}_ff_init({p}_ff *f, {r} r);\n"
+        f"/* The feedforward input ({base['input_unit']}) for the target r. */\n"
+        f"{r} {p}_ff_step({p}_ff *f, {r} r);\n"
+    )
+    tol = INVERSE_TOL if ct.precision == "float64" else FLOAT32_TOL
+    code = fill(
+        "baseline_bwff.c.tmpl", **base, max_iter=str(MAX_ITER),
+        a1=lit(params.a1), a2=lit(params.a2), a3=lit(params.a3),
+        sg=lit(1.0 if params.a3 > 0 else -1.0), alpha=lit(params.alpha), beta=lit(params.beta),
+        gamma=lit(params.gamma), h_max=lit(inverse_bound(params)), b_scale=lit(1.0001),
+        b_pad=lit(1e-12), tol=lit(tol),
+    )  # fmt: skip
+    return proto, code
+
+
+def _piff_code(ct: CTypes, base: dict[str, str], ff: PrandtlFeedforward) -> tuple[str, str]:
+    """The inverse Prandtl-Ishlinskii operator of :class:`PrandtlFeedforward`."""
+    p, r, lit = base["prefix"], ct.real, ct.literal
     inv = ff.inverse
     n = inv.n
     thresholds = ", ".join(lit(v) for v in inv.thresholds)
@@ -78,17 +132,7 @@ def _ff_code(ct: CTypes, base: dict[str, str], ctrl: BaselineController) -> dict
         f"        f->z[i] = lo > m ? lo : m;\n    }}\n"
         f"    out = f->z[0] * W[0];\n{terms}    return out + {lit(inv.offset)};\n}}\n"
     )
-    step = (
-        f"        {{\n            const {r} v = {p}_ff_target(({r})xm, ({r})vm, ({r})am);\n"
-        f"            if (first) {{\n                {p}_ff_init(&f, v);\n            }}\n"
-        f"            ff = {p}_ff_step(&f, v);\n        }}"
-    )
-    return {
-        "ff_prototypes": proto,
-        "ff_code": code,
-        "ff_state": f"    {p}_ff f;",
-        "ff_step": step,
-    }
+    return proto, code
 
 
 def _law(ct: CTypes, ctrl: BaselineController) -> dict[str, str]:
@@ -136,22 +180,22 @@ def baseline_c_sources(
     Raises
     ------
     InputError
-        ``kind`` not exported (``pi-bwff``: module docstring) or unknown, bad prefix.
+        ``kind`` unknown, bad prefix; ``pi-bwff`` for a plant outside the bounded class
+        (the inverse's bracket needs the hysteresis bound).
     ConfigError
         No ``[sampling]`` dt.
     """
-    if kind == "pi-bwff":
-        raise InputError(
-            "the pi-bwff baseline is not exported: its inverse Bouc-Wen feedforward solves a "
-            "scalar equation per sample with scipy's brentq, which C would not reproduce bit "
-            "for bit; export --controller pi and feed it that feedforward"
-        )
     if kind not in EXPORTED_BASELINES:
         raise InputError(
             f"export-c --controller takes {', '.join(EXPORTED_BASELINES)}, got {kind!r}"
         )
     ct = CTypes(precision)
     prefix = check_prefix(prefix)
+    if kind == "pi-bwff" and not config.plant.bounded_class().bounded:
+        raise InputError(
+            "the pi-bwff baseline is exported for plants in the bounded Bouc-Wen class only: "
+            "the C inverse's bracket needs the hysteresis bound alpha/(beta + gamma)"
+        )
     if config.dt is None:
         raise ConfigError(f"{config.source or 'config'}: export-c needs [sampling] dt")
     loop = ClosedLoop.baseline_from_config(
@@ -197,6 +241,13 @@ def baseline_c_sources(
         "nominal_loop": analysis.to_dict(),
         "delay": bool(delay),
     }
+    if kind == "pi-bwff":
+        document["inverse"] = {
+            "method": "safeguarded Newton per sample (bwdesign.model.inverse.inverse_step)",
+            "tol": INVERSE_TOL if precision == "float64" else FLOAT32_TOL,
+            "max_iter": MAX_ITER,
+            "h_max": inverse_bound(params),
+        }
     files["export.json"] = dump_json(document) + "\n"
     return files, document
 

@@ -9,7 +9,8 @@ the names of ``bwdesign simulate --controller``:
 - ``"pi"``: ``u = Kp e + Ki q``, ``e = x_d - y``;
 - ``"pid"``: plus a filtered derivative on the measurement (no derivative kick);
 - ``"pi-bwff"``: PI plus the exact inverse of the Bouc–Wen model as feedforward (the
-  inverse the envelope is derived with, :func:`bwdesign.model.envelope.feedforward_input`);
+  inverse the envelope is derived with, :func:`bwdesign.model.inverse.inverse_input`: a
+  safeguarded Newton iteration per sample that the C export repeats operation for operation);
 - ``"pi-piff"``: PI plus the analytic inverse of a Prandtl–Ishlinskii operator
   (:mod:`bwdesign.model.prandtl`) fitted to the model's quasi-static record
   (:mod:`bwdesign.identify.prandtl`), applied to the quasi-static equivalent of the
@@ -45,7 +46,7 @@ import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.config import BASELINE_KINDS
-from ..model.envelope import feedforward_input
+from ..model.inverse import inverse_input
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.prandtl import PrandtlIshlinskii
@@ -65,7 +66,7 @@ __all__ = [
 @functools.lru_cache(maxsize=8)
 def _inverse_input(params, reference, t_bytes: bytes, allow_unbounded: bool) -> np.ndarray:
     t = np.frombuffer(t_bytes, dtype=float)
-    u, _, _ = feedforward_input(params, reference, t, allow_unbounded=allow_unbounded)
+    u, _ = inverse_input(params, reference, t, allow_unbounded=allow_unbounded)
     u.setflags(write=False)
     return u
 
@@ -74,8 +75,9 @@ class InverseBoucWenFeedforward:
     """Feedforward by the exact inverse of the Bouc–Wen model ``params``.
 
     The input under which ``x1`` follows ``x_d`` exactly on the model, solved sample by
-    sample from a zero hysteresis state (:func:`bwdesign.model.envelope.feedforward_input`,
-    the inverse the operating envelope is derived with).
+    sample from a zero hysteresis state (:func:`bwdesign.model.inverse.inverse_input`, the
+    inverse the operating envelope is derived with; ``export-c --controller pi-bwff``
+    writes the same iteration in C).
     """
 
     kind = "bwff"
@@ -96,9 +98,7 @@ class InverseBoucWenFeedforward:
         try:
             return _inverse_input(*key).copy()
         except TypeError:  # a reference that cannot be hashed: computed each time
-            u, _, _ = feedforward_input(
-                self.params, reference, t, allow_unbounded=self.allow_unbounded
-            )
+            u, _ = inverse_input(self.params, reference, t, allow_unbounded=self.allow_unbounded)
             return u
 
     def to_dict(self) -> dict[str, Any]:

@@ -31,8 +31,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..validate import UDOT_MAX, Range, integer, real
-from .params import BoucWenParams, require_bounded
-from .plant import hysteresis_increment
+from .inverse import inverse_input
+from .params import BoucWenParams
 from .references import Reference
 
 __all__ = ["Envelope", "derive_envelope", "given_envelope"]
@@ -96,6 +96,9 @@ def feedforward_input(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact-inverse input along ``t`` and its rate.
 
+    The input is :func:`bwdesign.model.inverse.inverse_input` (a safeguarded Newton
+    iteration per sample, the one the ``pi-bwff`` baseline and its C export run).
+
     Returns
     -------
     u : ndarray
@@ -105,49 +108,22 @@ def feedforward_input(
     h : ndarray
         The hysteresis state along the path.
     """
-    require_bounded(params, allow_unbounded)
     t = np.asarray(t, dtype=float)
+    u, h = inverse_input(params, reference, t, h0=h0, allow_unbounded=allow_unbounded)
     a1, a2, a3 = params.a1, params.a2, params.a3
-    pos, vel, acc = reference.evaluate(t)
-    jerk = reference.jerk(t)
-    R = acc + a2 * vel + a1 * pos
-    num = jerk + a2 * acc + a1 * vel
-    h_cap = params.bounded_class().h_max if params.bounded_class().bounded else 0.0
-    u = np.empty_like(t)
-    h = np.empty_like(t)
+    _, vel, acc = reference.evaluate(t)
+    num = reference.jerk(t) + a2 * acc + a1 * vel
     udot = np.empty_like(t)
-    # start on the linear inverse with the given hysteresis state
-    u_k = (R[0] + a1 * h0) / a3
-    h_k = h0
-    from scipy.optimize import brentq  # here: a study read from the cache never needs it
-
-    for k in range(t.size):
-        B = 1.0001 * max(abs(h_k), h_cap) + 1e-12
-        lo, hi = sorted(((R[k] - a1 * B) / a3, (R[k] + a1 * B) / a3))
-        uk, hk = u_k, h_k
-
-        def resid(v, uk=uk, hk=hk, Rk=R[k]):
-            return a3 * v - a1 * hysteresis_increment(params, hk, uk, v) - Rk
-
-        try:
-            u_new = brentq(resid, lo, hi, xtol=1e-13 * (1 + abs(hi)), rtol=1e-14)
-        except ValueError:  # no sign change: only outside the bounded class (no h_max)
-            raise InputError(
-                f"the exact inverse model has no input at t = {t[k]:.6g} s within the "
-                f"hysteresis bound {B:.6g} (this parameter set is outside the bounded class); "
-                "state the envelope directly ([envelope] udot_max)"
-            ) from None
-        h_new = hysteresis_increment(params, h_k, u_k, u_new)
+    for k, (h_new, n_k) in enumerate(zip(h.tolist(), num.tolist(), strict=True)):
         rate = math.nan
         for s in (1.0, -1.0):
             slope = params.alpha - params.beta * s * h_new - params.gamma * abs(h_new)
             den = a3 - a1 * slope
-            cand = num[k] / den if den != 0 else math.inf
+            cand = n_k / den if den != 0 else math.inf
             if cand == 0 or math.copysign(1.0, cand) == s:
                 rate = cand
                 break
-        u[k], h[k], udot[k] = u_new, h_new, rate
-        u_k, h_k = u_new, h_new
+        udot[k] = rate
     return u, udot, h
 
 

@@ -23,37 +23,26 @@ and the divergence status; a scenario's full record is replayed with
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..control.baselines import PIDState
 from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.references import Reference
 from ..observers.spec import GAIN_KINDS
 from .closed_loop import baseline_feedforward
-from .kernel import (
-    ARRAY,
-    BaselineConstants,
-    BaselineState,
-    LoopConstants,
-    LoopState,
-    advance,
-    advance_baseline,
-    correct,
-    discrete_observer_gains,
-    hysteresis_increment_batch,
-)
+from .kernel import SCALAR, LoopConstants, discrete_observer_gains, hysteresis_increment_batch
 from .run import Run, disturbance_samples, diverged, prepare, resolve_window
+from .zoh import true_matrices
 
 __all__ = ["BatchResult", "simulate_batch", "hysteresis_increment_batch"]
 
 BATCH_OBSERVERS = GAIN_KINDS
-_NOISE_BLOCK = 512
+#: Noise values held at once: scenarios are run in groups of at most this many samples.
+_CHUNK_VALUES = 4_000_000
 
 
 @dataclass(frozen=True)
@@ -74,6 +63,10 @@ class BatchResult:
     input_rate_max : ndarray
         Largest ``|u_k - u_{k-1}| / dt`` of the applied input over ``window``
         (input unit/s); NaN when unstable.
+    saturated_fraction : ndarray
+        Share of the samples whose applied input is at a ``u_limits`` bound (the run's
+        every sample, as :attr:`bwdesign.sim.SimulationResult.saturated_fraction`; a
+        diverged one's samples up to the divergence); 0 without limits.
     window : (float, float)
         Metrics window (s).
     samples : int
@@ -90,58 +83,13 @@ class BatchResult:
     estimation_rmse: np.ndarray
     estimation_maxe: np.ndarray
     input_rate_max: np.ndarray
+    saturated_fraction: np.ndarray
     window: tuple[float, float]
     samples: int
     settings: dict[str, Any] = field(repr=False)
 
     def __len__(self) -> int:
         return int(self.stable.size)
-
-
-def _zoh_batch(a1: np.ndarray, a2: np.ndarray, a3: np.ndarray, dt: float) -> np.ndarray:
-    """:func:`bwdesign.model.plant.discretize`'s augmented exponential, stacked (N, 4, 4)."""
-    w0 = np.sqrt(a1)
-    n = a1.size
-    Mz = np.zeros((n, 4, 4))
-    Mz[:, 0, 1] = w0
-    Mz[:, 1, 0] = -w0
-    Mz[:, 1, 1] = -a2
-    Mz[:, 1, 2] = -w0
-    Mz[:, 1, 3] = w0
-    D = np.stack([np.ones(n), w0, np.ones(n), a1 / a3], axis=1)
-    return D[:, :, None] * _expm_stack(Mz * dt) / D[:, None, :]
-
-
-def _expm_stack(A: np.ndarray) -> np.ndarray:
-    """``expm`` of a stack of small matrices (N, m, m): scaling and squaring with Taylor.
-
-    One vectorised pass instead of N calls of :func:`scipy.linalg.expm` (which costs
-    more than the simulation for short runs). After scaling to ``||A/2^s||_1 <= 1/2``
-    the degree-18 Taylor remainder is below ``0.5^19 / 19! ~ 2e-23``, far below
-    double rounding; the result agrees with scipy to rounding (checked in the tests).
-    """
-    norm = float(np.max(np.abs(A).sum(axis=-2))) if A.size else 0.0
-    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
-    X = A / 2.0**s
-    eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
-    E = eye.copy()
-    term = eye.copy()
-    for k in range(1, 19):
-        term = term @ X / k
-        E = E + term
-    for _ in range(s):
-        E = E @ E
-    return E
-
-
-def _true_matrices(true_params: list[BoucWenParams], dt: float) -> dict[str, np.ndarray]:
-    col = {k: np.array([getattr(tp, k) for tp in true_params]) for k in ("a1", "a2", "a3")}
-    E = _zoh_batch(col["a1"], col["a2"], col["a3"], dt)
-    out = {f"p{i + 1}{j + 1}": E[:, i, j].copy() for i in range(2) for j in range(3)}
-    out.update(g1=E[:, 0, 3].copy(), g2=E[:, 1, 3].copy(), w0=np.sqrt(col["a1"]))
-    for k in ("alpha", "beta", "gamma"):
-        out[k] = np.array([getattr(tp, k) for tp in true_params])
-    return out
 
 
 def _per_scenario(value: Any, n: int, name: str) -> np.ndarray:
@@ -244,145 +192,124 @@ def simulate_batch(
         ),
         estimation_maxe=np.where(stable[:, None], np.stack(acc["est_max"], axis=1), np.nan),
         input_rate_max=np.where(stable, acc["du_max"] / loop.dt, np.nan),
+        saturated_fraction=acc["saturated"] / np.where(stable, run.n, acc["ran"]),
         window=(float(win[0]), float(win[1])),
         samples=run.n,
         settings=settings,
     )
 
 
-def _noise_blocks(gens, noise_std: np.ndarray, n: int):
-    """Each scenario's noise, ``_NOISE_BLOCK`` time steps at a time: yields ``(k, column)``."""
-    N = noise_std.size
-    noisy = np.flatnonzero(noise_std > 0)
-    for k0 in range(0, n, _NOISE_BLOCK):
-        block = min(_NOISE_BLOCK, n - k0)
-        noise = np.zeros((N, block))
-        for i in noisy:
-            noise[i] = noise_std[i] * gens[i].standard_normal(block)
-        for j in range(block):
-            yield k0 + j, noise[:, j]
+def _plant_rows(T: dict[str, np.ndarray], limit: float) -> np.ndarray:
+    """The compiled runners' ``plant`` array (:func:`.compiled.observer_batch`)."""
+    names = ("p11", "p12", "p13", "p21", "p22", "p23", "g1", "g2", "alpha", "beta", "gamma")
+    cols = [T[k] for k in names] + [limit * T["w0"]]
+    return np.ascontiguousarray(np.stack(cols, axis=1), dtype=float)
+
+
+def _chunks(run: Run, noise_std: np.ndarray, seeds, dist):
+    """Scenario ranges of at most ``_CHUNK_VALUES`` noise values:
+    ``(lo, hi, noise, dist, noisy)``.
+
+    Scenario ``i``'s noise is ``noise_std[i] * default_rng(seeds[i]).standard_normal(n)``,
+    as :func:`simulate` draws it; ``dist`` rows are scenarios (none, or one per scenario).
+    """
+    n, N = run.n, noise_std.size
+    noisy = bool(np.any(noise_std > 0))
+    step = max(1, _CHUNK_VALUES // max(n, 1)) if noisy or dist is not None else N
+    for lo in range(0, N, step):
+        hi = min(N, lo + step)
+        noise = np.zeros((hi - lo, n) if noisy else (1, 1))
+        for i in range(lo, hi) if noisy else ():
+            if noise_std[i] > 0:
+                rng = np.random.default_rng(int(seeds[i]))
+                noise[i - lo] = noise_std[i] * rng.standard_normal(n)
+        d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(dist[:, lo:hi].T)
+        yield lo, hi, noise if noisy else np.zeros((1, 1)), d, noisy
+
+
+def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, count: int):
+    """The accumulated statistics and each scenario's status from the runners' ``out``."""
+    alive = out[:, 10] != 0.0
+    status = ["ok"] * out.shape[0]
+    for i in np.flatnonzero(~alive):
+        x1, x2, x3, h1, h2, hw, ua = out[i, 12:19]
+        why = diverged(limit, T["w0"][i], x1, x2, x3, h1, h2, hw, ua) or "non-finite state"
+        status[i] = f"diverged at t = {(int(out[i, 11]) + 1) * dt:.6g} s: {why}"
+    return {
+        "sum_abs": out[:, 0].copy(),
+        "sum_sq": out[:, 1].copy(),
+        "max_abs": out[:, 2].copy(),
+        "est_sq": [out[:, 3 + j].copy() for j in range(3)],
+        "est_max": [out[:, 6 + j].copy() for j in range(3)],
+        "du_max": out[:, 9].copy(),
+        "saturated": out[:, 19].copy(),
+        # a diverged scenario's samples run, up to and including the divergence
+        "ran": out[:, 11] + 1.0,
+        "count": count,
+        "alive": alive,
+        "status": status,
+    }
 
 
 def _run_batch_baseline(run: Run, in_win: np.ndarray, noise_std, seeds, dist) -> dict:
-    """A baseline loop for every scenario at once (:func:`.kernel.advance_baseline`)."""
-    loop, n, N = run.loop, run.n, len(run.true_params)
+    """A baseline loop for every scenario (:func:`.compiled.baseline_batch`)."""
+    from .compiled import baseline_batch  # here: numba is loaded by a batch only
+
+    loop, N = run.loop, len(run.true_params)
     dt, limit = loop.dt, loop.divergence_limit
-    ref = run.reference_terms()
-    xd_l = ref[0].tolist()
+    xd = run.reference_terms()[0]
     ff = baseline_feedforward(run)
-    c = BaselineConstants(loop, ff, ref, ARRAY)
-    T = _true_matrices(list(run.true_params), dt)
-    c.set_plants(T)
-    c.dist = dist
+    c = loop.controller.constants()
+    law = np.array([c.kp, c.ki, c.da, c.db, c.dt, c.lo, c.hi], dtype=float)
+    win = np.append(in_win, False).astype(float)
+    ref = np.ascontiguousarray(np.stack([np.append(ff, 0.0), xd, win]))
+    T = true_matrices(list(run.true_params), dt)
+    plant = _plant_rows(T, limit)
     start = run.start
     q0 = loop.controller.start(start.x0[0], start.u_prev, ff[0]).q
-    pid = PIDState(np.full(N, q0), np.zeros(N), np.full(N, float(start.x0[0])))
-    s = BaselineState([np.full(N, float(v)) for v in start.x0], np.full(N, start.u_prev), pid)
-    alive = np.ones(N, dtype=bool)
-    status = ["ok"] * N
-    vlim = limit * T["w0"]
-    gens = [np.random.default_rng(int(seed)) for seed in seeds]
-    acc = {"sum_abs": np.zeros(N), "sum_sq": np.zeros(N), "max_abs": np.zeros(N)}
-    acc.update(du_max=np.zeros(N), count=0)
-    with np.errstate(all="ignore"):
-        for k, noise in _noise_blocks(gens, noise_std, n):
-            if in_win[k]:
-                e = s.x1 - xd_l[k]
-                acc["sum_abs"] += np.abs(e)
-                acc["sum_sq"] += e * e
-                np.maximum(acc["max_abs"], np.abs(e), out=acc["max_abs"])
-                acc["count"] += 1
-            applied, up = advance_baseline(c, s, k, s.x1 + noise)
-            if in_win[k]:
-                np.maximum(acc["du_max"], np.abs(applied - up), out=acc["du_max"])
-            ok = (np.abs(s.x1) <= limit) & (np.abs(s.x3) <= limit) & (np.abs(s.x2) <= vlim)
-            ok &= np.abs(s.ua) < 1e300
-            for i in np.flatnonzero(alive & ~ok):
-                why = diverged(limit, T["w0"][i], s.x1[i], s.x2[i], s.x3[i], 0.0, 0.0, 0.0, s.ua[i])
-                status[i] = f"diverged at t = {(k + 1) * dt:.6g} s: {why or 'non-finite state'}"
-                alive[i] = False
+    x0 = [float(v) for v in start.x0]
+    st = np.array([*x0, float(start.u_prev), float(q0)])
+    out = np.zeros((N, 20))
+    for lo, hi, noise, d, noisy in _chunks(run, noise_std, seeds, dist):
+        flags = np.array([float(bool(loop.delay)), limit, float(noisy)])
+        baseline_batch(plant[lo:hi], law, ref, flags, st, noise, d, out[lo:hi])
+    acc = _finish(out, T, limit, dt, int(np.count_nonzero(in_win)))
     nan = np.full(N, np.nan)
-    acc.update(alive=alive, status=status, est_sq=[nan] * 3, est_max=[nan] * 3)
+    acc.update(est_sq=[nan] * 3, est_max=[nan] * 3)
     return acc
 
 
 def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds, dist) -> dict:
-    """The loop for every scenario at once: :mod:`bwdesign.sim.kernel`'s step on arrays."""
-    loop, n, N = run.loop, run.n, len(run.true_params)
+    """The loop for every scenario (:func:`.compiled.observer_batch`, the step of
+    :mod:`bwdesign.sim.kernel` compiled)."""
+    from .compiled import observer_batch  # here: numba is loaded by a batch only
+
+    loop, N = run.loop, len(run.true_params)
     dt, limit = loop.dt, loop.divergence_limit
-    ref = run.reference_terms()
-    xd_l = ref[0].tolist()
-    c = LoopConstants(loop, discrete_observer_gains(loop), ref, ARRAY)
-    T = _true_matrices(list(run.true_params), dt)
-    c.set_plants(T)
-    c.dist = dist
-    start = run.start
-    s = LoopState(
-        [np.full(N, float(v)) for v in start.x0],
-        [np.full(N, float(v)) for v in start.xhat0],
-        np.zeros(N),  # the PHDO's disturbance estimate (starts at 0)
-        np.full(N, start.u_prev),
-        np.zeros(N),
+    ref3 = run.reference_terms()
+    c = LoopConstants(loop, discrete_observer_gains(loop), ref3, SCALAR)
+    m = loop.model
+    model = np.array(
+        [c.m11, c.m12, c.m13, c.m21, c.m22, c.m23, c.mg1, c.mg2, m.alpha, m.beta, m.gamma]
     )
-    alive = np.ones(N, dtype=bool)
-    status = ["ok"] * N
-    vlim = limit * T["w0"]
-    gens = [np.random.default_rng(int(seed)) for seed in seeds]
-    noisy = noise_std > 0
-    acc = {
-        "sum_abs": np.zeros(N),
-        "sum_sq": np.zeros(N),
-        "max_abs": np.zeros(N),
-        "est_sq": [np.zeros(N), np.zeros(N), np.zeros(N)],  # one contiguous array per state
-        "est_max": [np.zeros(N), np.zeros(N), np.zeros(N)],
-        "du_max": np.zeros(N),
-        "count": 0,
-    }
-    with np.errstate(all="ignore"):
-        for k in range(n):
-            j = k % _NOISE_BLOCK
-            if j == 0:
-                block = min(_NOISE_BLOCK, n - k)
-                noise = np.zeros((N, block))
-                for i in np.flatnonzero(noisy):
-                    noise[i] = noise_std[i] * gens[i].standard_normal(block)
-            correct(c, s, s.x1 + noise[:, j])
-            if in_win[k]:
-                _accumulate(acc, s, xd_l[k])
-            applied, up = advance(c, s, k)
-            if in_win[k]:
-                np.maximum(acc["du_max"], np.abs(applied - up), out=acc["du_max"])
-            ok = (
-                (np.abs(s.x1) <= limit)
-                & (np.abs(s.x3) <= limit)
-                & (np.abs(s.h1) <= limit)
-                & (np.abs(s.hw) <= limit)
-                & (np.abs(s.x2) <= vlim)
-                & (np.abs(s.h2) <= vlim)
-                & (np.abs(s.ua) < 1e300)
-            )
-            for i in np.flatnonzero(alive & ~ok):
-                why = diverged(
-                    limit, T["w0"][i], s.x1[i], s.x2[i], s.x3[i], s.h1[i], s.h2[i], s.hw[i],
-                    s.ua[i],
-                ) or "non-finite state"  # fmt: skip
-                status[i] = f"diverged at t = {(k + 1) * dt:.6g} s: {why}"
-                alive[i] = False
-    acc["alive"], acc["status"] = alive, status
-    return acc
-
-
-def _accumulate(acc: dict, s: LoopState, xd: float) -> None:
-    """One in-window sample of the tracking and estimation statistics."""
-    e = s.x1 - xd
-    a = np.abs(e)
-    acc["sum_abs"] += a
-    acc["sum_sq"] += e * e
-    np.maximum(acc["max_abs"], a, out=acc["max_abs"])  # NaN propagates: unstable, masked
-    for sq, mx, hh, xx in zip(
-        acc["est_sq"], acc["est_max"], (s.h1, s.h2, s.hw), (s.x1, s.x2, s.x3), strict=True
-    ):
-        d = hh - xx
-        sq += d * d
-        np.maximum(mx, np.abs(d), out=mx)
-    acc["count"] += 1
+    gains = np.array([c.K1, c.K2, c.K3, c.K4])
+    lim = np.array([v for pair in c.limits for v in pair] if c.clip else [0.0] * 6, dtype=float)
+    law = np.array(
+        [c.kx1, c.kx2, c.kx3, c.ki, c.cdt, c.ulo, c.uhi, float(c.integral), float(c.clip)]
+    )
+    win = np.append(in_win, False).astype(float)
+    ref = np.ascontiguousarray(np.stack([np.asarray(c.ff, dtype=float), ref3[0], win]))
+    T = true_matrices(list(run.true_params), dt)
+    plant = _plant_rows(T, limit)
+    start = run.start
+    st = np.array([*(float(v) for v in start.x0), *(float(v) for v in start.xhat0)] + [0.0])
+    st[6] = float(start.u_prev)
+    out = np.zeros((N, 20))
+    for lo, hi, noise, d, noisy in _chunks(run, noise_std, seeds, dist):
+        flags = np.array(
+            [float(c.four), float(c.phso), float(bool(c.delay)), float(bool(c.compensate)),
+             limit, float(noisy)]
+        )  # fmt: skip
+        consts = (model, gains, law, lim, flags, st)
+        observer_batch(plant[lo:hi], consts, ref, noise, d, out[lo:hi])
+    return _finish(out, T, limit, dt, int(np.count_nonzero(in_win)))

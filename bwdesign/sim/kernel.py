@@ -3,10 +3,11 @@
 :func:`correct` (the measurement update) and :func:`advance` (the law, the plant's
 ZOH step with its exact hysteresis jump, the observer's prediction and the delay)
 are plain arithmetic on the fields of a :class:`LoopState`. With Python floats they
-are :func:`bwdesign.sim.simulate`'s fast path; with numpy arrays of ``N`` scenarios
-they are :func:`bwdesign.sim.simulate_batch`. Only the element-wise helpers differ
-(:data:`SCALAR` and :data:`ARRAY`: clipping and the hysteresis increment), so every
-scenario of a batch runs the scalar loop's operations in the same order.
+are :func:`bwdesign.sim.simulate`'s fast path. :func:`bwdesign.sim.simulate_batch` runs
+the same step compiled (:mod:`bwdesign.sim.compiled`, the same operations in the same
+order, written out as scalar code). The step also runs on numpy arrays of ``N`` scenarios
+(:data:`ARRAY`: clipping and :class:`BatchHysteresis` element-wise), which
+:func:`hysteresis_increment_batch` and the tests use.
 
 Per sample ``k`` (see :mod:`bwdesign.sim`)::
 
@@ -36,6 +37,7 @@ from ..control.loop import ClosedLoop
 from ..model.params import BoucWenParams
 from ..model.plant import discretize, hysteresis_increment
 from ..observers.gains import discrete_gains, disturbance_discrete_gains
+from .zoh import true_matrices
 
 __all__ = [
     "LoopConstants",
@@ -177,10 +179,13 @@ class LoopConstants:
             self.model_h = lambda h, u0, u1: hysteresis_increment(m, h, u0, u1)
 
     def set_plant(self, tp: BoucWenParams, dt: float) -> None:
-        """One true plant (one run): its exact ZOH matrices and hysteresis."""
-        zt = discretize(tp, dt)
-        (self.p11, self.p12, self.p13), (self.p21, self.p22, self.p23) = zt.F[0], zt.F[1]
-        self.pg1, self.pg2 = float(zt.g[0]), float(zt.g[1])
+        """One true plant (one run): its exact ZOH matrices (:func:`.zoh.true_matrices`, as
+        a batch computes them) and hysteresis."""
+        T = true_matrices([tp], dt)
+        self.p11, self.p12, self.p13, self.p21, self.p22, self.p23 = (
+            float(T[k][0]) for k in ("p11", "p12", "p13", "p21", "p22", "p23")
+        )
+        self.pg1, self.pg2 = float(T["g1"][0]), float(T["g2"][0])
         self.plant_h = lambda h, u0, u1: hysteresis_increment(tp, h, u0, u1)
 
     def set_plants(self, T: dict[str, np.ndarray]) -> None:

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["Metrics", "tracking_metrics", "steady_state_window"]
+__all__ = ["Metrics", "tracking_metrics", "steady_state_window", "running_sum"]
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,16 @@ def steady_state_window(
     return (t_end - fraction * span, t_end)
 
 
+def running_sum(v: np.ndarray, axis: int = 0) -> Any:
+    """The sum of ``v`` along ``axis`` added in order (``np.add.accumulate``), as the
+    batched loop accumulates it; ``np.sum``'s pairwise order would differ in the last bits
+    from :func:`bwdesign.sim.simulate_batch`'s metrics of the same run."""
+    v = np.asarray(v, dtype=float)
+    if v.shape[axis] == 0:
+        return np.sum(v, axis=axis)
+    return np.take(np.add.accumulate(v, axis=axis), -1, axis=axis)
+
+
 def tracking_metrics(
     e: np.ndarray, t: np.ndarray | None = None, window: tuple[float, float] | None = None
 ) -> Metrics:
@@ -105,8 +116,8 @@ def tracking_metrics(
     a = np.abs(w)
     return Metrics(
         maxe=float(a.max()),
-        me=float(a.mean()),
-        rmse=float(np.sqrt(np.mean(w * w))),
+        me=float(running_sum(a) / w.size),
+        rmse=float(np.sqrt(running_sum(w * w) / w.size)),
         window=(float(t0), float(t1)),
         samples=int(w.size),
     )

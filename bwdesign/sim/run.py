@@ -23,7 +23,7 @@ from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time
 from ..model.references import Reference
 from ..validate import Range, below_nyquist, real
-from .metrics import steady_state_window, tracking_metrics
+from .metrics import running_sum, steady_state_window, tracking_metrics
 from .result import SimulationResult
 
 __all__ = [
@@ -203,7 +203,7 @@ def finish(
             sel = (t >= win[0] - 1e-12) & (t <= win[1] + 1e-12)
             d = xhat[sel] - x[sel]
             if not run.loop.baseline:  # a baseline has no estimate
-                est = tuple(float(v) for v in np.sqrt(np.mean(d * d, axis=0)))
+                est = tuple(float(v) for v in np.sqrt(running_sum(d * d) / len(d)))
         except InputError as err:
             stable, status = False, f"no metrics: {err}"
     return SimulationResult(

@@ -10,10 +10,10 @@ plant, and at the worst corner (largest ME, per loop) of the ``[uncertainty]`` b
 of :data:`DEFAULT_BOX` (+-2 % on the linear part, +-10 % on the hysteresis) when the
 stage has none. The runs are as the report's tracking runs: three reference periods,
 starting on the reference, no noise, no computation delay, metrics over the last two
-periods. The corners are simulated as one batch (:func:`bwdesign.simulate_batch`); the
-worst is rerun with :func:`bwdesign.simulate` for its saturated share, and every row
-carries the ``bwdesign simulate`` command that reproduces it (a corner by
-``--mismatch``, :func:`bwdesign.model.mismatch.corner_text`).
+periods. The nominal plant and the corners are simulated as one batch
+(:func:`bwdesign.simulate_batch`, which also counts the saturated samples; a loop the
+report's tracking runs already simulated keeps that nominal run), and every row
+carries the ``bwdesign simulate`` command that reproduces it (a corner by ``--mismatch``, :func:`bwdesign.model.mismatch.corner_text`).
 
 :func:`configured_baseline` (the part ``baseline``) is the ``[baseline]`` controller's
 nominal linear analysis, which the requirement ``baseline_stable`` checks.
@@ -35,8 +35,7 @@ from ..model.config import BASELINE_KINDS, StageConfig
 from ..model.mismatch import corner_text
 from ..model.references import Reference, Sine, Step, Triangle
 from ..model.uncertainty import UncertaintyBox
-from ..sim.batch import simulate_batch
-from ..sim.closed_loop import simulate
+from ..sim.batch import BatchResult, simulate_batch
 from ..sim.result import SimulationResult
 from .tracking import TrackingRun, report_loops, simulate_command
 
@@ -238,14 +237,31 @@ def _baseline_command(config, kind, duration, limits, unbounded) -> list[str]:
     return argv + (["--allow-unbounded"] if unbounded else [])
 
 
-def _worst(loop, ref, duration, plants, command, box, params) -> LoopOutcome:
-    """The corner with the largest ME (an unstable one first), rerun for its record."""
-    b = simulate_batch(loop, ref, plants, duration=duration)
-    me = np.where(b.stable, b.me, np.inf)
-    i = int(np.argmax(me))
-    text = corner_text(box, params, plants[i])
-    r = simulate(loop, ref, duration=duration, true_params=plants[i])
-    return _outcome(r, [*command, "--mismatch", text], text)
+def _batch_outcome(b: BatchResult, i: int, command: list[str], corner: str | None):
+    """Scenario ``i`` of a batch as a row's run (its saturated share from the batch)."""
+    ok = bool(b.stable[i])
+    return LoopOutcome(
+        stable=ok,
+        status=b.status[i],
+        me=float(b.me[i]) if ok else None,
+        maxe=float(b.maxe[i]) if ok else None,
+        rmse=float(b.rmse[i]) if ok else None,
+        saturated=float(b.saturated_fraction[i]) if b.settings["controller"].get("u_limits")
+        else None,
+        command=tuple(command),
+        corner=corner,
+    )  # fmt: skip
+
+
+def _runs(loop, ref, duration, plants, command, box, params) -> tuple[Any, Any, tuple]:
+    """The nominal run, the corner with the largest ME (an unstable one first) and the
+    metrics window, from one batch of the nominal plant and the corners."""
+    b = simulate_batch(loop, ref, [params, *plants], duration=duration)
+    me = np.where(b.stable[1:], b.me[1:], np.inf)
+    i = int(np.argmax(me)) + 1
+    text = corner_text(box, params, plants[i - 1])
+    nominal = _batch_outcome(b, 0, command, None)
+    return nominal, _batch_outcome(b, i, [*command, "--mismatch", text], text), b.window
 
 
 def _winner(rows: list[ComparisonRow], where: str) -> Winner | None:
@@ -307,23 +323,21 @@ def baseline_comparison(
         cmd = _baseline_command(config, kind, duration, limits, allow_unbounded) + extra
         try:
             loop = ClosedLoop.baseline_from_config(config, kind, allow_unbounded=allow_unbounded)
-            r = simulate(loop, ref, duration=duration)
-            worst = _worst(loop, ref, duration, plants, cmd, box, params)
+            nominal, worst, window = _runs(loop, ref, duration, plants, cmd, box, params)
         except BWDesignError as err:  # e.g. no exact inverse outside the bounded class
             gone = LoopOutcome(False, f"not run: {err}", None, None, None, None, tuple(cmd))
             rows.append(ComparisonRow(BASELINE_LABELS[kind], True, gone, gone))
             continue
-        window = r.window
-        rows.append(ComparisonRow(BASELINE_LABELS[kind], True, _outcome(r, cmd, None), worst))
+        rows.append(ComparisonRow(BASELINE_LABELS[kind], True, nominal, worst))
     observer_loops = report_loops(
         config, gains=gains, tuning=tuning, allow_unbounded=allow_unbounded
     )
     for label, loop in observer_loops.items():
         cmd = simulate_command(config, loop, duration, allow_unbounded) + extra
-        r = known[label].result if label in known else simulate(loop, ref, duration=duration)
-        window = r.window
-        worst = _worst(loop, ref, duration, plants, cmd, box, params)
-        rows.append(ComparisonRow(label, False, _outcome(r, cmd, None), worst))
+        nominal, worst, window = _runs(loop, ref, duration, plants, cmd, box, params)
+        if label in known:  # the report's own tracking run of this loop
+            nominal = _outcome(known[label].result, cmd, None)
+        rows.append(ComparisonRow(label, False, nominal, worst))
     return BaselineComparison(
         reference=ref,
         box=box,

@@ -1,0 +1,351 @@
+"""The batched loop's sample step, compiled (numba): scenario by scenario, no array overhead.
+
+:func:`bwdesign.sim.simulate_batch` ran :mod:`bwdesign.sim.kernel`'s step on numpy arrays,
+one array operation per term and time step: for the few dozen scenarios of a box's corners
+(the report, the falsifier) the arrays are short and the interpreter's overhead per
+operation is the whole cost (about 25 us per time step, issue 28). The two functions here
+are that step written out once more as scalar code, compiled by numba and run scenario
+after scenario: :func:`observer_batch` (:func:`~bwdesign.sim.kernel.correct` and
+:func:`~bwdesign.sim.kernel.advance`) and :func:`baseline_batch`
+(:func:`~bwdesign.sim.kernel.advance_baseline`). Each does the scalar loop's float
+operations in the same order, with the same closed-form hysteresis jump
+(:func:`bwdesign.model.plant.hysteresis_increment`), so every scenario's metrics agree with
+:func:`bwdesign.sim.simulate` to rounding (the tests ask for 1e-9 relative; they agree to
+the last bit where libm and numba call the same ``exp``, ``expm1`` and ``log1p``).
+
+The arguments are plain float64 arrays and flags (:mod:`bwdesign.sim.batch` packs them).
+A scenario that leaves the divergence limits stops there: its step index and state are
+returned for the message, its metrics are not used. The compiled code is cached beside
+this file (``cache=True``), so only the first run on a machine pays the compilation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = ["observer_batch", "baseline_batch", "hysteresis_jump"]
+
+
+@njit(cache=True, inline="always")
+def _branch(h, w, alpha, c):
+    x = c * w
+    if abs(x) < 1e-8:
+        frac = 1.0 - x / 2.0 + x * x / 6.0
+    else:
+        frac = -math.expm1(-x) / x
+    return h * math.exp(-x) + alpha * w * frac
+
+
+@njit(cache=True)
+def hysteresis_jump(alpha, beta, gamma, h, u0, u1):
+    """:func:`bwdesign.model.plant.hysteresis_increment`, compiled (same operations)."""
+    du = u1 - u0
+    if du == 0.0:
+        return h
+    s = 1.0 if du > 0.0 else -1.0
+    g = s * h
+    w = abs(du)
+    if g < 0.0:
+        cm = beta - gamma
+        if cm == 0.0:
+            wz = -g / alpha
+        else:
+            arg = -cm * g / alpha
+            wz = math.log1p(arg) / cm if arg > -1.0 else math.inf
+        if w <= wz:
+            return s * _branch(g, w, alpha, cm)
+        g = 0.0
+        w = w - wz
+    return s * _branch(g, w, alpha, beta + gamma)
+
+
+@njit(cache=True, inline="always")
+def _clip(v, lo, hi):
+    # min(max(v, lo), hi) as the scalar loop (NaN stays NaN)
+    if lo > v:
+        v = lo
+    if v > hi:
+        v = hi
+    return v
+
+
+@njit(cache=True)
+def _law(law, lim, ff, xd, a, b, h, i, q):
+    """:func:`bwdesign.sim.kernel._law` without the jump: ``(v, q)``.
+
+    ``law`` = kx1, kx2, kx3, ki, cdt, ulo, uhi, integral, clip; ``lim`` the estimate limits.
+    """
+    if law[8] != 0.0:
+        a = _clip(a, lim[0], lim[1])
+        b = _clip(b, lim[2], lim[3])
+        h = _clip(h, lim[4], lim[5])
+    f = ff[i] + law[3] * q
+    v = f + law[0] * a + law[1] * b + law[2] * h
+    if law[7] != 0.0:
+        q = q + law[4] * (a - xd[i])
+    return _clip(v, law[5], law[6]), q
+
+
+def observer_batch(plant, consts, ref, noise, dist, out):
+    """Run the observer loop for every scenario (rows of ``plant``).
+
+    Parameters (float64 unless said)
+    ----------
+    plant : (N, 12)
+        p11, p12, p13, p21, p22, p23, g1, g2, alpha, beta, gamma, velocity limit.
+    consts : tuple of arrays
+        ``model`` (11: m11, m12, m13, m21, m22, m23, mg1, mg2, alpha, beta, gamma of the
+        model), ``gains`` (4: K1..K4 of the sampled observer, K4 = 0 without the
+        disturbance state), ``law`` (9) and ``lim`` (6) as :func:`_law`, ``flags`` (6: four,
+        phso, delay, compensate, divergence limit, has noise), ``start`` (7: x1, x2, x3,
+        xhat1, xhat2, xhat3, u_prev).
+    ref : (3, n + 1)
+        ff (the law's reference term), x_d, the in-window mask (1.0 inside).
+    noise : (N, n)
+        Sensor noise (read only with the noise flag).
+    dist : (R, n)
+        Input disturbance per sample: no row (none), one row (common) or one per scenario.
+    out : (N, 20)
+        Written: sum_abs, sum_sq, max_abs, est_sq x3, est_max x3, du_max, alive, the step
+        of the divergence, the state there (x1, x2, x3, xhat1, xhat2, xhat_lumped, u_a),
+        the number of samples whose applied input is at an input limit.
+    """
+    _observer_batch(plant, *consts, ref, noise, dist, out)
+
+
+@njit(cache=True)
+def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dist, out):
+    N = plant.shape[0]
+    n = ref.shape[1] - 1
+    ff, xd, win = ref[0], ref[1], ref[2]
+    four, phso = flags[0] != 0.0, flags[1] != 0.0
+    delay, compensate = flags[2] != 0.0, flags[3] != 0.0
+    limit, noisy = flags[4], flags[5] != 0.0
+    K1, K2, K3, K4 = gains[0], gains[1], gains[2], gains[3]
+    m11, m12, m13, m21, m22, m23, mg1, mg2 = (
+        model[0],
+        model[1],
+        model[2],
+        model[3],
+        model[4],
+        model[5],
+        model[6],
+        model[7],
+    )  # noqa: E501
+    ma, mb, mc = model[8], model[9], model[10]
+    rows = dist.shape[0]
+    for i in range(N):
+        p11, p12, p13, p21, p22, p23 = (
+            plant[i, 0],
+            plant[i, 1],
+            plant[i, 2],
+            plant[i, 3],
+            plant[i, 4],
+            plant[i, 5],
+        )  # noqa: E501
+        pg1, pg2, pa, pb, pc, vlim = (
+            plant[i, 6],
+            plant[i, 7],
+            plant[i, 8],
+            plant[i, 9],
+            plant[i, 10],
+            plant[i, 11],
+        )  # noqa: E501
+        x1, x2, x3 = start[0], start[1], start[2]
+        h1, h2, h3 = start[3], start[4], start[5]
+        hd = 0.0
+        hw = h3
+        up = start[6]
+        ua = start[6]
+        q = 0.0
+        drow = i if rows > 1 else 0
+        sa = 0.0
+        sq = 0.0
+        mx = 0.0
+        e1 = 0.0
+        e2 = 0.0
+        e3 = 0.0
+        x1m = 0.0
+        x2m = 0.0
+        x3m = 0.0
+        dum = 0.0
+        sat = 0.0
+        out[i, 10] = 1.0
+        out[i, 11] = -1.0
+        for k in range(n):
+            z = x1 + noise[i, k] if noisy else x1
+            r = z - h1
+            h1 = h1 + K1 * r
+            h2 = h2 + K2 * r
+            h3 = h3 + K3 * r
+            if four:
+                hd = hd + K4 * r
+                hw = h3 + hd
+            else:
+                hw = h3
+            inw = win[k] != 0.0
+            if inw:
+                e = x1 - xd[k]
+                sa += abs(e)
+                sq += e * e
+                mx = max(mx, abs(e))
+                d = h1 - x1
+                e1 += d * d
+                x1m = max(x1m, abs(d))
+                d = h2 - x2
+                e2 += d * d
+                x2m = max(x2m, abs(d))
+                d = hw - x3
+                e3 += d * d
+                x3m = max(x3m, abs(d))
+            u_next = 0.0
+            if not delay:
+                applied, q = _law(law, lim, ff, xd, h1, h2, hw, k, q)
+            else:
+                applied = ua
+                if not compensate:
+                    u_next, q = _law(law, lim, ff, xd, h1, h2, hw, k, q)
+            uprev = up
+            hh = hysteresis_jump(pa, pb, pc, x3, uprev, applied)
+            ud = applied + dist[drow, k] if rows > 0 else applied
+            nx1 = p11 * x1 + p12 * x2 + p13 * hh + pg1 * ud
+            x2 = p21 * x1 + p22 * x2 + p23 * hh + pg2 * ud
+            x1 = nx1
+            x3 = hh
+            g3 = hysteresis_jump(ma, mb, mc, h3, uprev, applied) if phso else h3
+            gw = g3 + hd if four else g3
+            nh1 = m11 * h1 + m12 * h2 + m13 * gw + mg1 * applied
+            h2 = m21 * h1 + m22 * h2 + m23 * gw + mg2 * applied
+            h1 = nh1
+            h3 = g3
+            hw = g3 + hd if four else g3
+            if delay:
+                if compensate:
+                    u_next, q = _law(law, lim, ff, xd, h1, h2, hw, k + 1, q)
+                ua = u_next
+            up = applied
+            if applied <= law[5] or applied >= law[6]:
+                sat += 1.0
+            if inw:
+                dum = max(dum, abs(applied - uprev))
+            ok = (
+                abs(x1) <= limit
+                and abs(x3) <= limit
+                and abs(h1) <= limit
+                and abs(hw) <= limit
+                and abs(x2) <= vlim
+                and abs(h2) <= vlim
+                and abs(ua) < 1e300
+            )
+            if not ok:
+                out[i, 10] = 0.0
+                out[i, 11] = k
+                out[i, 12], out[i, 13], out[i, 14] = x1, x2, x3
+                out[i, 15], out[i, 16], out[i, 17], out[i, 18] = h1, h2, hw, ua
+                break
+        out[i, 0], out[i, 1], out[i, 2] = sa, sq, mx
+        out[i, 3], out[i, 4], out[i, 5] = e1, e2, e3
+        out[i, 6], out[i, 7], out[i, 8] = x1m, x2m, x3m
+        out[i, 9] = dum
+        out[i, 19] = sat
+
+
+@njit(cache=True)
+def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
+    """Run a baseline loop (:func:`bwdesign.control.baselines.pid_step`) for every scenario.
+
+    ``plant``, ``noise``, ``dist`` and ``out`` as :func:`observer_batch` (the estimation
+    columns stay 0); ``law`` = kp, ki, da, db, dt, lo, hi; ``ref`` = ff, x_d, in-window;
+    ``flags`` = delay, divergence limit, has noise; ``start`` = x1, x2, x3, u_prev, q0.
+    """
+    N = plant.shape[0]
+    n = ref.shape[1] - 1
+    ff, xd, win = ref[0], ref[1], ref[2]
+    kp, ki, da, db, cdt, lo, hi = law[0], law[1], law[2], law[3], law[4], law[5], law[6]
+    delay, limit, noisy = flags[0] != 0.0, flags[1], flags[2] != 0.0
+    rows = dist.shape[0]
+    for i in range(N):
+        p11, p12, p13, p21, p22, p23 = (
+            plant[i, 0],
+            plant[i, 1],
+            plant[i, 2],
+            plant[i, 3],
+            plant[i, 4],
+            plant[i, 5],
+        )  # noqa: E501
+        pg1, pg2, pa, pb, pc, vlim = (
+            plant[i, 6],
+            plant[i, 7],
+            plant[i, 8],
+            plant[i, 9],
+            plant[i, 10],
+            plant[i, 11],
+        )  # noqa: E501
+        x1, x2, x3 = start[0], start[1], start[2]
+        up = start[3]
+        ua = start[3]
+        q = start[4]
+        dd = 0.0
+        zp = start[0]
+        drow = i if rows > 1 else 0
+        sa = 0.0
+        sq = 0.0
+        mx = 0.0
+        dum = 0.0
+        sat = 0.0
+        out[i, 10] = 1.0
+        out[i, 11] = -1.0
+        for k in range(n):
+            inw = win[k] != 0.0
+            if inw:
+                e = x1 - xd[k]
+                sa += abs(e)
+                sq += e * e
+                mx = max(mx, abs(e))
+            z = x1 + noise[i, k] if noisy else x1
+            # pid_step, operation for operation
+            e = xd[k] - z
+            dd = da * dd - db * (z - zp)
+            zp = z
+            qn = q + cdt * e
+            v = ff[k] + kp * e + ki * qn + dd
+            hold = 0.0
+            if (v > hi and e > 0) or (v < lo and e < 0):
+                hold = 1.0
+            q = qn + hold * (q - qn)
+            u = _clip(v, lo, hi)
+            if delay:
+                applied = ua
+                ua = u
+            else:
+                applied = u
+            uprev = up
+            hh = hysteresis_jump(pa, pb, pc, x3, uprev, applied)
+            ud = applied + dist[drow, k] if rows > 0 else applied
+            nx1 = p11 * x1 + p12 * x2 + p13 * hh + pg1 * ud
+            x2 = p21 * x1 + p22 * x2 + p23 * hh + pg2 * ud
+            x1 = nx1
+            x3 = hh
+            up = applied
+            if applied <= lo or applied >= hi:
+                sat += 1.0
+            if inw:
+                dum = max(dum, abs(applied - uprev))
+            ok = abs(x1) <= limit and abs(x3) <= limit and abs(x2) <= vlim and abs(ua) < 1e300
+            if not ok:
+                out[i, 10] = 0.0
+                out[i, 11] = k
+                out[i, 12], out[i, 13], out[i, 14] = x1, x2, x3
+                out[i, 15], out[i, 16], out[i, 17], out[i, 18] = 0.0, 0.0, 0.0, ua
+                break
+        out[i, 0], out[i, 1], out[i, 2] = sa, sq, mx
+        out[i, 9] = dum
+        out[i, 19] = sat
+
+
+def empty_out(N: int) -> np.ndarray:
+    """The ``out`` array of the two runners for ``N`` scenarios."""
+    return np.zeros((N, 20))
