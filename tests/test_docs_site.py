@@ -147,3 +147,12 @@ def test_pages_render_in_chromium(page, heading):
     if page.startswith("auto_examples/"):
         figures = [src for src, _ in state["images"] if "sphx_glr_" in (src or "")]
         assert figures, "the gallery page shows no figure of its script"
+
+
+def test_the_gallery_has_runnable_examples():
+    """At least eight gallery scripts, each with the title sphinx-gallery needs."""
+    scripts = sorted((ROOT / "examples/gallery").glob("plot_*.py"))
+    assert len(scripts) >= 8, scripts
+    for script in scripts:
+        head = script.read_text(encoding="utf-8").lstrip().splitlines()[:3]
+        assert head[0] == '"""' and set(head[2]) == {"="}, script.name
