@@ -13,7 +13,8 @@ starting on the reference, no noise, no computation delay, metrics over the last
 periods. The nominal plant and the corners are simulated as one batch
 (:func:`bwdesign.simulate_batch`, which also counts the saturated samples; a loop the
 report's tracking runs already simulated keeps that nominal run), and every row
-carries the ``bwdesign simulate`` command that reproduces it (a corner by ``--mismatch``, :func:`bwdesign.model.mismatch.corner_text`).
+carries the ``bwdesign simulate`` command that reproduces it (a corner by ``--mismatch``,
+:func:`bwdesign.model.mismatch.corner_text`).
 
 :func:`configured_baseline` (the part ``baseline``) is the ``[baseline]`` controller's
 nominal linear analysis, which the requirement ``baseline_stable`` checks.
