@@ -80,8 +80,8 @@ def test_stacked_zoh_matches_discretize():
     for i, tp in enumerate(tps):
         z = discretize(tp, DT)
         got = [[T[f"p{r + 1}{c + 1}"][i] for c in range(3)] for r in range(2)]
-        np.testing.assert_allclose(got, z.F[:2], rtol=1e-12, atol=1e-14 * np.abs(z.F[:2]).max())
-        np.testing.assert_allclose([T["g1"][i], T["g2"][i]], z.g[:2], rtol=1e-12)
+        assert got == z.F[:2].tolist()  # the same matrices as one run's (sim/zoh.py)
+        assert [T["g1"][i], T["g2"][i]] == z.g[:2].tolist()
 
 
 def test_hysteresis_batch_matches_scalar():

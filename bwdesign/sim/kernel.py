@@ -37,7 +37,6 @@ from ..control.loop import ClosedLoop
 from ..model.params import BoucWenParams
 from ..model.plant import discretize, hysteresis_increment
 from ..observers.gains import discrete_gains, disturbance_discrete_gains
-from .zoh import true_matrices
 
 __all__ = [
     "LoopConstants",
@@ -179,13 +178,11 @@ class LoopConstants:
             self.model_h = lambda h, u0, u1: hysteresis_increment(m, h, u0, u1)
 
     def set_plant(self, tp: BoucWenParams, dt: float) -> None:
-        """One true plant (one run): its exact ZOH matrices (:func:`.zoh.true_matrices`, as
-        a batch computes them) and hysteresis."""
-        T = true_matrices([tp], dt)
-        self.p11, self.p12, self.p13, self.p21, self.p22, self.p23 = (
-            float(T[k][0]) for k in ("p11", "p12", "p13", "p21", "p22", "p23")
-        )
-        self.pg1, self.pg2 = float(T["g1"][0]), float(T["g2"][0])
+        """One true plant (one run): its exact ZOH matrices (the batch's too,
+        :func:`.zoh.true_matrices`) and hysteresis."""
+        zt = discretize(tp, dt)
+        (self.p11, self.p12, self.p13), (self.p21, self.p22, self.p23) = zt.F[0], zt.F[1]
+        self.pg1, self.pg2 = float(zt.g[0]), float(zt.g[1])
         self.plant_h = lambda h, u0, u1: hysteresis_increment(tp, h, u0, u1)
 
     def set_plants(self, T: dict[str, np.ndarray]) -> None:
