@@ -265,8 +265,9 @@ def certify_robust(
     noise_max : float
         Sensor noise bound ``|n| <= noise_max`` (length unit).
     a : float, optional
-        Contraction per sample in ``(0, 1)``; default: searched for the
-        smallest tracking bound.
+        Contraction per sample in ``(0, 1)``; default: where the peak-to-peak bounds
+        apply (they give the certified bounds), the fastest feasible contraction of a
+        grid on ``log(1 - a)``; otherwise searched for the smallest ellipsoid bound.
     interior_samples : int
         Seeded interior points of the box where the same ``P`` is re-checked.
     seed : int
