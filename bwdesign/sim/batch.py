@@ -1,19 +1,23 @@
-"""Batched sampled-data closed loop: N scenarios advanced together, vectorised over the scenarios.
+"""Batched sampled-data closed loop: N scenarios in one compiled call.
 
 :func:`simulate_batch` runs the loop of :func:`bwdesign.sim.simulate` (the exact
-ZOH plant with each scenario's *true* parameters, the PHSO or ESO on the common
+ZOH plant with each scenario's *true* parameters, the PHSO, ESO or PHDO on the common
 model, the linear law of a :class:`~bwdesign.TrackingController` or
 :class:`~bwdesign.DiscreteTrackingController`, sensor noise, a one-sample delay,
-saturation and estimate clipping) for ``N`` scenarios at once. Every operation
-is the scalar loop's operation on a vector of scenarios, in the same order, so
-each scenario's metrics agree with :func:`simulate` on the same inputs to
-rounding (the tests ask for 1e-9 relative); the noise of scenario ``i`` is
-``noise_std[i] * default_rng(seeds[i]).standard_normal(n)``, exactly as
-:func:`simulate` draws it, generated in blocks of time steps.
+saturation and estimate clipping) for ``N`` scenarios. The sample step is
+:mod:`bwdesign.sim.kernel`'s, written as scalar code and compiled
+(:mod:`bwdesign.sim.compiled`): the same operations in the same order on the same
+matrices (:func:`bwdesign.sim.zoh.true_matrices`), the metrics added in the same order
+(:func:`bwdesign.sim.metrics.running_sum`), so each scenario's metrics equal
+:func:`simulate`'s on the same inputs to the bit (tested); the noise of scenario ``i``
+is ``noise_std[i] * default_rng(seeds[i]).standard_normal(n)``, exactly as
+:func:`simulate` draws it, scenarios taken in groups so that at most a few million
+noise values are held at once.
 
 Not batched (use :func:`simulate`): the UKF, observer objects or factories, and
 controllers with ``hysteresis_jump``. Baseline loops (no observer) are batched on
-:func:`~bwdesign.sim.kernel.advance_baseline`; their estimation statistics are NaN.
+:func:`~bwdesign.sim.compiled.baseline_batch` (the step of
+:func:`~bwdesign.sim.kernel.advance_baseline`); their estimation statistics are NaN.
 
 Only what a sweep needs is kept per scenario: the steady-state window's
 statistics (MAXE, ME, RMSE, estimation RMSE and max error per state), stability

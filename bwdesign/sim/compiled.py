@@ -9,9 +9,9 @@ after scenario: :func:`observer_batch` (:func:`~bwdesign.sim.kernel.correct` and
 :func:`~bwdesign.sim.kernel.advance`) and :func:`baseline_batch`
 (:func:`~bwdesign.sim.kernel.advance_baseline`). Each does the scalar loop's float
 operations in the same order, with the same closed-form hysteresis jump
-(:func:`bwdesign.model.plant.hysteresis_increment`), so every scenario's metrics agree with
-:func:`bwdesign.sim.simulate` to rounding (the tests ask for 1e-9 relative; they agree to
-the last bit where libm and numba call the same ``exp``, ``expm1`` and ``log1p``).
+(:func:`bwdesign.model.plant.hysteresis_increment`; numba calls the same libm ``exp``,
+``expm1`` and ``log1p`` as Python's ``math``), so every scenario's metrics equal
+:func:`bwdesign.sim.simulate`'s to the bit (tested, noise, delay and limits included).
 
 The arguments are plain float64 arrays and flags (:mod:`bwdesign.sim.batch` packs them).
 A scenario that leaves the divergence limits stops there: its step index and state are
