@@ -241,3 +241,34 @@ def paper_report(tmp_path_factory) -> WrittenReport:
     (tests/test_claims_report.py); every one of them only reads it.
     """
     return write_report_once(tmp_path_factory, "paper_report", PAPER_CONFIG)
+
+
+def headless_chromium(window: str = "1280,2000"):
+    """A headless Chromium (selenium) for the browser tests; skipped without one, failed
+    under ``BWDESIGN_REQUIRE_BROWSER=1`` (CI installs chromium and chromium-driver)."""
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    chromedriver = shutil.which("chromedriver")
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        chromium = None
+    if not (chromium and chromedriver):
+        if os.environ.get("BWDESIGN_REQUIRE_BROWSER") == "1":
+            pytest.fail("BWDESIGN_REQUIRE_BROWSER=1 but chromium/chromedriver/selenium missing")
+        pytest.skip("no headless Chromium (install chromium and chromium-driver)")
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = chromium
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        f"--window-size={window}",
+    ):
+        opts.add_argument(flag)
+    return webdriver.Chrome(service=Service(chromedriver), options=opts)

@@ -13,12 +13,12 @@ installs Debian's chromium and chromium-driver, so there both must run.
 from __future__ import annotations
 
 import os
-import shutil
 from html.parser import HTMLParser
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 import pytest
+from conftest import headless_chromium
 
 ROOT = Path(__file__).resolve().parents[1]
 SITE = ROOT / "docs/_build/html"
@@ -93,23 +93,7 @@ def test_every_internal_link_resolves():
 
 
 def _driver():
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    chromedriver = shutil.which("chromedriver")
-    try:
-        from selenium import webdriver
-        from selenium.webdriver.chrome.service import Service
-    except ImportError:
-        chromium = None
-    if not (chromium and chromedriver):
-        if REQUIRED:
-            pytest.fail("BWDESIGN_REQUIRE_BROWSER=1 but chromium/chromedriver/selenium missing")
-        pytest.skip("no headless Chromium (install chromium and chromium-driver)")
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = chromium
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage"):
-        opts.add_argument(flag)
-    opts.add_argument("--window-size=1280,2000")
-    return webdriver.Chrome(service=Service(chromedriver), options=opts)
+    return headless_chromium()
 
 
 _STATE = """

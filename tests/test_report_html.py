@@ -5,13 +5,12 @@ BWDESIGN_REQUIRE_BROWSER=1 (CI installs Debian's chromium and chromium-driver).
 """
 
 import json
-import os
 import re
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import headless_chromium
 
 from bwdesign.plotting.figures import plot_estimation_errors, save_figure
 from bwdesign.report.document import Document
@@ -21,32 +20,7 @@ REPORTS = sorted((ROOT / "reports").glob("*/report.html"))
 
 
 def _driver():
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    chromedriver = shutil.which("chromedriver")
-    try:
-        from selenium import webdriver
-        from selenium.webdriver.chrome.service import Service
-    except ImportError:
-        chromium = None
-    if not (chromium and chromedriver):
-        if os.environ.get("BWDESIGN_REQUIRE_BROWSER") == "1":
-            pytest.fail("BWDESIGN_REQUIRE_BROWSER=1 but chromium/chromedriver/selenium missing")
-        pytest.skip("no headless Chromium (install chromium and chromium-driver)")
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = chromium
-    for flag in (
-        "--headless=new",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-dev-shm-usage",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--no-first-run",
-        "--window-size=1280,2000",
-    ):
-        opts.add_argument(flag)
-    return webdriver.Chrome(service=Service(chromedriver), options=opts)
+    return headless_chromium()
 
 
 @pytest.fixture(scope="module")

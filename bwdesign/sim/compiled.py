@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
 __all__ = ["observer_batch", "baseline_batch", "hysteresis_jump"]
@@ -116,63 +115,49 @@ def observer_batch(plant, consts, ref, noise, dist, out):
     _observer_batch(plant, *consts, ref, noise, dist, out)
 
 
+@njit(cache=True, inline="always")
+def _plant_step(p, x1, x2, x3, uprev, applied, ud):
+    """The true plant's jump and ZOH step (``p``: a row of ``plant`` as a tuple), as
+    :func:`bwdesign.sim.kernel.advance`: the linear part sees ``ud``, the hysteresis ``u``."""
+    hh = hysteresis_jump(p[8], p[9], p[10], x3, uprev, applied)
+    nx1 = p[0] * x1 + p[1] * x2 + p[2] * hh + p[6] * ud
+    nx2 = p[3] * x1 + p[4] * x2 + p[5] * hh + p[7] * ud
+    return nx1, nx2, hh
+
+
+@njit(cache=True, inline="always")
+def _stop(row, k, x1, x2, x3, h1, h2, hw, ua):
+    """Mark a scenario diverged at step ``k``, with its state there (``row``: of ``out``)."""
+    row[10] = 0.0
+    row[11] = k
+    row[12], row[13], row[14] = x1, x2, x3
+    row[15], row[16], row[17], row[18] = h1, h2, hw, ua
+
+
 @njit(cache=True)
 def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dist, out):
-    N = plant.shape[0]
     n = ref.shape[1] - 1
     ff, xd, win = ref[0], ref[1], ref[2]
     four, phso = flags[0] != 0.0, flags[1] != 0.0
     delay, compensate = flags[2] != 0.0, flags[3] != 0.0
     limit, noisy = flags[4], flags[5] != 0.0
     K1, K2, K3, K4 = gains[0], gains[1], gains[2], gains[3]
-    m11, m12, m13, m21, m22, m23, mg1, mg2 = (
-        model[0],
-        model[1],
-        model[2],
-        model[3],
-        model[4],
-        model[5],
-        model[6],
-        model[7],
-    )  # noqa: E501
-    ma, mb, mc = model[8], model[9], model[10]
+    m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
+         model[8], model[9], model[10])  # fmt: skip
     rows = dist.shape[0]
-    for i in range(N):
-        p11, p12, p13, p21, p22, p23 = (
-            plant[i, 0],
-            plant[i, 1],
-            plant[i, 2],
-            plant[i, 3],
-            plant[i, 4],
-            plant[i, 5],
-        )  # noqa: E501
-        pg1, pg2, pa, pb, pc, vlim = (
-            plant[i, 6],
-            plant[i, 7],
-            plant[i, 8],
-            plant[i, 9],
-            plant[i, 10],
-            plant[i, 11],
-        )  # noqa: E501
+    for i in range(plant.shape[0]):
+        # the row as a tuple: its entries stay in registers over the run
+        pr = plant[i]
+        p = (pr[0], pr[1], pr[2], pr[3], pr[4], pr[5], pr[6], pr[7], pr[8], pr[9], pr[10])
+        vlim = pr[11]
         x1, x2, x3 = start[0], start[1], start[2]
         h1, h2, h3 = start[3], start[4], start[5]
         hd = 0.0
         hw = h3
-        up = start[6]
-        ua = start[6]
+        up = ua = start[6]
         q = 0.0
         drow = i if rows > 1 else 0
-        sa = 0.0
-        sq = 0.0
-        mx = 0.0
-        e1 = 0.0
-        e2 = 0.0
-        e3 = 0.0
-        x1m = 0.0
-        x2m = 0.0
-        x3m = 0.0
-        dum = 0.0
-        sat = 0.0
+        sa = sq = mx = e1 = e2 = e3 = m1 = m2 = m3 = dum = sat = 0.0
         out[i, 10] = 1.0
         out[i, 11] = -1.0
         for k in range(n):
@@ -192,15 +177,11 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 sa += abs(e)
                 sq += e * e
                 mx = max(mx, abs(e))
-                d = h1 - x1
-                e1 += d * d
-                x1m = max(x1m, abs(d))
-                d = h2 - x2
-                e2 += d * d
-                x2m = max(x2m, abs(d))
-                d = hw - x3
-                e3 += d * d
-                x3m = max(x3m, abs(d))
+                d1, d2, d3 = h1 - x1, h2 - x2, hw - x3
+                e1 += d1 * d1
+                e2 += d2 * d2
+                e3 += d3 * d3
+                m1, m2, m3 = max(m1, abs(d1)), max(m2, abs(d2)), max(m3, abs(d3))
             u_next = 0.0
             if not delay:
                 applied, q = _law(law, lim, ff, xd, h1, h2, hw, k, q)
@@ -209,16 +190,12 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 if not compensate:
                     u_next, q = _law(law, lim, ff, xd, h1, h2, hw, k, q)
             uprev = up
-            hh = hysteresis_jump(pa, pb, pc, x3, uprev, applied)
             ud = applied + dist[drow, k] if rows > 0 else applied
-            nx1 = p11 * x1 + p12 * x2 + p13 * hh + pg1 * ud
-            x2 = p21 * x1 + p22 * x2 + p23 * hh + pg2 * ud
-            x1 = nx1
-            x3 = hh
-            g3 = hysteresis_jump(ma, mb, mc, h3, uprev, applied) if phso else h3
+            x1, x2, x3 = _plant_step(p, x1, x2, x3, uprev, applied, ud)
+            g3 = hysteresis_jump(m[8], m[9], m[10], h3, uprev, applied) if phso else h3
             gw = g3 + hd if four else g3
-            nh1 = m11 * h1 + m12 * h2 + m13 * gw + mg1 * applied
-            h2 = m21 * h1 + m22 * h2 + m23 * gw + mg2 * applied
+            nh1 = m[0] * h1 + m[1] * h2 + m[2] * gw + m[6] * applied
+            h2 = m[3] * h1 + m[4] * h2 + m[5] * gw + m[7] * applied
             h1 = nh1
             h3 = g3
             hw = g3 + hd if four else g3
@@ -231,7 +208,7 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 sat += 1.0
             if inw:
                 dum = max(dum, abs(applied - uprev))
-            ok = (
+            if not (
                 abs(x1) <= limit
                 and abs(x3) <= limit
                 and abs(h1) <= limit
@@ -239,17 +216,11 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 and abs(x2) <= vlim
                 and abs(h2) <= vlim
                 and abs(ua) < 1e300
-            )
-            if not ok:
-                out[i, 10] = 0.0
-                out[i, 11] = k
-                out[i, 12], out[i, 13], out[i, 14] = x1, x2, x3
-                out[i, 15], out[i, 16], out[i, 17], out[i, 18] = h1, h2, hw, ua
+            ):
+                _stop(out[i], k, x1, x2, x3, h1, h2, hw, ua)
                 break
-        out[i, 0], out[i, 1], out[i, 2] = sa, sq, mx
-        out[i, 3], out[i, 4], out[i, 5] = e1, e2, e3
-        out[i, 6], out[i, 7], out[i, 8] = x1m, x2m, x3m
-        out[i, 9] = dum
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3], out[i, 4] = sa, sq, mx, e1, e2
+        out[i, 5], out[i, 6], out[i, 7], out[i, 8], out[i, 9] = e3, m1, m2, m3, dum
         out[i, 19] = sat
 
 
@@ -261,41 +232,23 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
     columns stay 0); ``law`` = kp, ki, da, db, dt, lo, hi; ``ref`` = ff, x_d, in-window;
     ``flags`` = delay, divergence limit, has noise; ``start`` = x1, x2, x3, u_prev, q0.
     """
-    N = plant.shape[0]
     n = ref.shape[1] - 1
     ff, xd, win = ref[0], ref[1], ref[2]
     kp, ki, da, db, cdt, lo, hi = law[0], law[1], law[2], law[3], law[4], law[5], law[6]
     delay, limit, noisy = flags[0] != 0.0, flags[1], flags[2] != 0.0
     rows = dist.shape[0]
-    for i in range(N):
-        p11, p12, p13, p21, p22, p23 = (
-            plant[i, 0],
-            plant[i, 1],
-            plant[i, 2],
-            plant[i, 3],
-            plant[i, 4],
-            plant[i, 5],
-        )  # noqa: E501
-        pg1, pg2, pa, pb, pc, vlim = (
-            plant[i, 6],
-            plant[i, 7],
-            plant[i, 8],
-            plant[i, 9],
-            plant[i, 10],
-            plant[i, 11],
-        )  # noqa: E501
+    for i in range(plant.shape[0]):
+        # the row as a tuple: its entries stay in registers over the run
+        pr = plant[i]
+        p = (pr[0], pr[1], pr[2], pr[3], pr[4], pr[5], pr[6], pr[7], pr[8], pr[9], pr[10])
+        vlim = pr[11]
         x1, x2, x3 = start[0], start[1], start[2]
-        up = start[3]
-        ua = start[3]
+        up = ua = start[3]
         q = start[4]
         dd = 0.0
         zp = start[0]
         drow = i if rows > 1 else 0
-        sa = 0.0
-        sq = 0.0
-        mx = 0.0
-        dum = 0.0
-        sat = 0.0
+        sa = sq = mx = dum = sat = 0.0
         out[i, 10] = 1.0
         out[i, 11] = -1.0
         for k in range(n):
@@ -323,29 +276,16 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
             else:
                 applied = u
             uprev = up
-            hh = hysteresis_jump(pa, pb, pc, x3, uprev, applied)
             ud = applied + dist[drow, k] if rows > 0 else applied
-            nx1 = p11 * x1 + p12 * x2 + p13 * hh + pg1 * ud
-            x2 = p21 * x1 + p22 * x2 + p23 * hh + pg2 * ud
-            x1 = nx1
-            x3 = hh
+            x1, x2, x3 = _plant_step(p, x1, x2, x3, uprev, applied, ud)
             up = applied
             if applied <= lo or applied >= hi:
                 sat += 1.0
             if inw:
                 dum = max(dum, abs(applied - uprev))
-            ok = abs(x1) <= limit and abs(x3) <= limit and abs(x2) <= vlim and abs(ua) < 1e300
-            if not ok:
-                out[i, 10] = 0.0
-                out[i, 11] = k
-                out[i, 12], out[i, 13], out[i, 14] = x1, x2, x3
-                out[i, 15], out[i, 16], out[i, 17], out[i, 18] = 0.0, 0.0, 0.0, ua
+            if not (abs(x1) <= limit and abs(x3) <= limit and abs(x2) <= vlim and abs(ua) < 1e300):
+                _stop(out[i], k, x1, x2, x3, 0.0, 0.0, 0.0, ua)
                 break
         out[i, 0], out[i, 1], out[i, 2] = sa, sq, mx
         out[i, 9] = dum
         out[i, 19] = sat
-
-
-def empty_out(N: int) -> np.ndarray:
-    """The ``out`` array of the two runners for ``N`` scenarios."""
-    return np.zeros((N, 20))
