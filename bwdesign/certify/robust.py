@@ -123,7 +123,7 @@ from scipy.linalg import matrix_balance, solve_discrete_lyapunov
 from ..control.controllers import DiscreteTrackingController
 from ..control.loop import ClosedLoop
 from ..errors import InputError
-from ..model.params import BoucWenParams, require_bounded
+from ..model.params import MODEL_FIELDS, BoucWenParams, require_bounded
 from ..model.plant import discretize
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
@@ -356,8 +356,8 @@ def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max:
     spec = ell.spectral_radius()
     rho = f"rho in [{st.rho_lo:.6g}, {st.rho_hi:.6g}]"
     if spec >= 1:
-        why = f"the loop is unstable at a corner of the box (spectral radius {spec:.6g} >= 1 at "
-        return _not_certified(base, why + rho + ")", math.nan, {"spectral_radius": spec})
+        why = f"the loop is unstable at {ell.hardest()} >= 1 at {rho}"
+        return _not_certified(base, why, math.nan, {"spectral_radius": spec})
     # every bound the peak-to-peak method gives is taken where smaller (_conclude); where it
     # gives one, the ellipsoid is needed for the common Lyapunov function (the decay and
     # the certificate over the box), not for its own bound: the fastest feasible contraction
@@ -374,7 +374,10 @@ def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max:
         sol, av = _contraction(ell, a, spec, st.statics[0])  # the full search after all
     if sol is None or not sol.ok:
         status = sol.status if sol is not None else "infeasible for every contraction tried"
-        why = f"no common Lyapunov function over the {n_v} corners and {rho} ({status})"
+        why = (
+            f"no common Lyapunov function over the {n_v} corners and {rho} ({status}); the "
+            f"hardest plant is the {ell.hardest()}"
+        )
         details = {"spectral_radius": spec, "attempts": list(sol.attempts) if sol else []}
         return _not_certified(base, why, av, details, sol.solver if sol is not None else "")
     return _conclude(st, ell, data, (sol, av), hb, noise_max, spec, st.lp.dt, base, peaks)
@@ -547,6 +550,7 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
         "a3": abs(tp.a3),
         "E": E_b,
         "rows": np.vstack(rows),
+        "plant": tp,
     }
 
 
@@ -564,6 +568,9 @@ class _Ellipsoids:
     n_corner: int
     s: np.ndarray
     active: dict[bytes, int] = field(default_factory=dict)
+    #: the plant (index into the data) of each block, and each plant's label
+    owner: list[int] = field(default_factory=list)
+    labels: list[str] = field(default_factory=list)
 
     @classmethod
     def build(
@@ -588,13 +595,26 @@ class _Ellipsoids:
 
         blocks_v = [scaled(A, B) for d in data_v for (A, B) in d["blocks"]]
         blocks_i = [scaled(A, B) for d in data_i for (A, B) in d["blocks"]]
-        ell = cls(blocks_v + blocks_i, len(blocks_v), s)
+        data = data_v + data_i
+        owner = [j for j, d in enumerate(data) for _ in d["blocks"]]
+        labels = [_plant_label(st.params, d["plant"]) for d in data]
+        ell = cls(blocks_v + blocks_i, len(blocks_v), s, owner=owner, labels=labels)
         for i, (A, B) in enumerate(blocks_v):
             ell.active.setdefault(A.tobytes() + B.tobytes(), i)
         return ell
 
     def spectral_radius(self) -> float:
-        return max(float(np.max(np.abs(np.linalg.eigvals(A)))) for A, _ in self.blocks)
+        return max(self.radii())
+
+    def radii(self) -> list[float]:
+        return [float(np.max(np.abs(np.linalg.eigvals(A)))) for A, _ in self.blocks]
+
+    def hardest(self) -> str:
+        """The plant of the block with the largest spectral radius, and that radius."""
+        r = self.radii()
+        i = int(np.argmax(r))
+        where = "corner" if i < self.n_corner else "interior point"
+        return f"{where} {self.labels[self.owner[i]]} (spectral radius {r[i]:.6g})"
 
     def attempt(self, av: float, c: np.ndarray) -> Any:
         """Solve on the distinct corner blocks plus the violated interior ones."""
@@ -631,7 +651,8 @@ class _Ellipsoids:
         for idx, (A, B) in enumerate(self.blocks):
             ev = schur_min_eig(Q, lam, A, B, av)
             where = "corner" if idx < self.n_corner else "interior"
-            margins.append(Margin(f"Schur block {idx} ({where}) > 0", -ev, 0.0))
+            label = self.labels[self.owner[idx]]
+            margins.append(Margin(f"Schur block {idx} ({where} {label}) > 0", -ev, 0.0))
         gam = float(lam.sum())
 
         def dyn(c):
@@ -643,6 +664,18 @@ class _Ellipsoids:
             return dyn(st.statics[i]) + max(float(d["static"][i]) for d in data)
 
         return margins, peak, dyn
+
+
+def _plant_label(params: BoucWenParams, tp: BoucWenParams) -> str:
+    """``tp`` against the model: each parameter that differs, in percent (``nominal``)."""
+    out = [
+        f"{k} {100 * (getattr(tp, k) / getattr(params, k) - 1):+.3g} %"
+        if getattr(params, k)
+        else f"{k} = {getattr(tp, k):.6g}"
+        for k in MODEL_FIELDS
+        if getattr(tp, k) != getattr(params, k)
+    ]
+    return "[" + ", ".join(out) + "]" if out else "[nominal]"
 
 
 def _rate_clause(step: float, udot_max: float, dt: float, unit: str) -> str:
