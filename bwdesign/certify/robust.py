@@ -114,16 +114,15 @@ recomputed from ``P`` with numpy. Solver trouble is a status, never a certificat
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from scipy.linalg import matrix_balance, solve_discrete_lyapunov
 
 from ..control.controllers import DiscreteTrackingController
 from ..control.loop import ClosedLoop
 from ..errors import InputError
-from ..model.params import MODEL_FIELDS, BoucWenParams, require_bounded
+from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import discretize
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
@@ -131,15 +130,10 @@ from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bo
 from ..observers.gains import check_gains, discrete_gains
 from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
-from .ellipsoid import (
-    copy_error_bound,
-    jump_mismatch,
-    schur_min_eig,
-    search_log_contraction,
-    solution,
-)
-from .results import CONTRACTION, Margin, RobustCertificate
+from .ellipsoid import copy_error_bound, jump_mismatch
+from .results import RobustCertificate
 from .robust_cover import cover_inputs, input_step_bound, plant_peaks
+from .robust_ellipsoid import Ellipsoids, contraction
 
 __all__ = ["RobustCertificate", "certify_robust"]
 
@@ -147,11 +141,6 @@ __all__ = ["RobustCertificate", "certify_robust"]
 _NS = 12
 #: Bounds below this share of the loop's signal size (sup |x_d| + h_max) are stated as it.
 ROUNDING = 1e-12
-#: Normalised eigenvalue below which an interior block joins the LMI.
-_ACTIVE_TOL = 1e-9
-#: Contraction search: grid points on log(1 - a), then golden-section steps.
-_A_GRID = 7
-_A_REFINE = 5
 
 
 @dataclass(frozen=True)
@@ -346,7 +335,8 @@ def _covers(st: _Setup, reference: Reference, data: list[dict], noise_max: float
 def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max: float, covers):
     """The common ellipsoid for one cover of the inputs, checked and concluded."""
     hb, W, input_bounds = covered
-    ell = _Ellipsoids.build(st, data[:n_v], data[n_v:], W)
+    nominal = _plant_data(st, st.params)["blocks"][0]
+    ell = Ellipsoids.build(st, data[:n_v], data[n_v:], W, nominal)
     base = {
         "n_vertices": n_v,
         "n_interior": len(data) - n_v,
@@ -364,14 +354,14 @@ def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max:
     # of the grid does, not the search for the one with the smallest ellipsoid bound
     peaks = [(cov, dd, l1) for cov, dd in covers if (l1 := plant_peaks(st, dd, cov[1])) is not None]
     quick = a is None and bool(peaks)
-    sol, av = _contraction(ell, a, spec, st.statics[0], first=quick)
+    sol, av = contraction(ell, a, spec, st.statics[0], first=quick)
     if (
         quick
         and sol is not None
         and sol.ok
         and not all(m.passed for m in ell.check(sol, av, st, data)[0])
     ):
-        sol, av = _contraction(ell, a, spec, st.statics[0])  # the full search after all
+        sol, av = contraction(ell, a, spec, st.statics[0])  # the full search after all
     if sol is None or not sol.ok:
         status = sol.status if sol is not None else "infeasible for every contraction tried"
         why = (
@@ -554,130 +544,6 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     }
 
 
-@dataclass
-class _Ellipsoids:
-    """The scaled LMI blocks of every plant and the solves of the common ellipsoid.
-
-    Corners that differ only in (alpha, beta, gamma) share their blocks (the
-    hysteresis enters through the global input bounds): each distinct corner block is
-    imposed once, and an interior block only once a solution violates it (``active``,
-    kept across the solves of one certificate).
-    """
-
-    blocks: list[tuple[np.ndarray, np.ndarray]]
-    n_corner: int
-    s: np.ndarray
-    active: dict[bytes, int] = field(default_factory=dict)
-    #: the plant (index into the data) of each block, and each plant's label
-    owner: list[int] = field(default_factory=list)
-    labels: list[str] = field(default_factory=list)
-
-    @classmethod
-    def build(
-        cls, st: _Setup, data_v: list[dict], data_i: list[dict], W: np.ndarray
-    ) -> _Ellipsoids:
-        keep = W > 0
-        Wk = W[keep]
-        # state scaling: balance the nominal loop, then the square root of the diagonal of
-        # its steady covariance under the normalised inputs, so that P is O(1)
-        (A_nom, B_nom), *_ = _plant_data(st, st.params)["blocks"]
-        _, (s, _) = matrix_balance(A_nom, permute=False, separate=True)
-        s = np.asarray(s, float)
-        if float(np.max(np.abs(np.linalg.eigvals(A_nom)))) < 1:
-            Ab = A_nom * s[None, :] / s[:, None]
-            Bb = B_nom[:, keep] * Wk[None, :] / s[:, None]
-            X = solve_discrete_lyapunov(Ab, Bb @ Bb.T)
-            s = s * np.sqrt(np.maximum(np.diag(X), 1e-12 * float(np.max(np.diag(X)))))
-
-        def scaled(A, B):
-            Bs = B[:, keep] * Wk[None, :]
-            return A * s[None, :] / s[:, None], Bs / s[:, None]
-
-        blocks_v = [scaled(A, B) for d in data_v for (A, B) in d["blocks"]]
-        blocks_i = [scaled(A, B) for d in data_i for (A, B) in d["blocks"]]
-        data = data_v + data_i
-        owner = [j for j, d in enumerate(data) for _ in d["blocks"]]
-        labels = [_plant_label(st.params, d["plant"]) for d in data]
-        ell = cls(blocks_v + blocks_i, len(blocks_v), s, owner=owner, labels=labels)
-        for i, (A, B) in enumerate(blocks_v):
-            ell.active.setdefault(A.tobytes() + B.tobytes(), i)
-        return ell
-
-    def spectral_radius(self) -> float:
-        return max(self.radii())
-
-    def radii(self) -> list[float]:
-        return [float(np.max(np.abs(np.linalg.eigvals(A)))) for A, _ in self.blocks]
-
-    def hardest(self) -> str:
-        """The plant of the block with the largest spectral radius, and that radius."""
-        r = self.radii()
-        i = int(np.argmax(r))
-        where = "corner" if i < self.n_corner else "interior point"
-        return f"{where} {self.labels[self.owner[i]]} (spectral radius {r[i]:.6g})"
-
-    def attempt(self, av: float, c: np.ndarray) -> Any:
-        """Solve on the distinct corner blocks plus the violated interior ones."""
-        from . import lmi
-
-        blocks, active = self.blocks, self.active
-        while True:
-            idx = sorted(active.values())
-            sol = lmi.robust_ellipsoid(
-                [blocks[i][0] for i in idx], [blocks[i][1] for i in idx], self.s * c, a=av
-            )
-            if not sol.ok:
-                return sol
-            Q, lam = solution(sol)
-            bad = [
-                i
-                for i in range(self.n_corner, len(blocks))
-                if i not in idx and schur_min_eig(Q, lam, *blocks[i], av) <= _ACTIVE_TOL
-            ]
-            if not bad:
-                return sol
-            for i in bad:
-                active.setdefault(blocks[i][0].tobytes() + blocks[i][1].tobytes(), i)
-
-    def check(self, sol: Any, av: float, st: _Setup, data: list[dict]):
-        """The outside check of every block, and the bounds of ``sol``'s ellipsoid.
-
-        Returns ``(margins, peak, dyn)``: ``dyn(c)`` bounds ``|c'z~|`` on the ellipsoid,
-        ``peak(i)`` the whole ``|c'z|`` for ``c = statics[i]`` (plus its quasi-static part).
-        """
-        s = self.s
-        Q, lam = solution(sol)
-        margins = [Margin("Q > 0", -float(np.linalg.eigvalsh(Q).min()), 0.0)]
-        for idx, (A, B) in enumerate(self.blocks):
-            ev = schur_min_eig(Q, lam, A, B, av)
-            where = "corner" if idx < self.n_corner else "interior"
-            label = self.labels[self.owner[idx]]
-            margins.append(Margin(f"Schur block {idx} ({where} {label}) > 0", -ev, 0.0))
-        gam = float(lam.sum())
-
-        def dyn(c):
-            cs = s * c
-            return math.sqrt(max(gam, 0.0) * float(cs @ Q @ cs))
-
-        def peak(i):
-            # the largest quasi-static part |c' G^-1 w_slow| over the plants
-            return dyn(st.statics[i]) + max(float(d["static"][i]) for d in data)
-
-        return margins, peak, dyn
-
-
-def _plant_label(params: BoucWenParams, tp: BoucWenParams) -> str:
-    """``tp`` against the model: each parameter that differs, in percent (``nominal``)."""
-    out = [
-        f"{k} {100 * (getattr(tp, k) / getattr(params, k) - 1):+.3g} %"
-        if getattr(params, k)
-        else f"{k} = {getattr(tp, k):.6g}"
-        for k in MODEL_FIELDS
-        if getattr(tp, k) != getattr(params, k)
-    ]
-    return "[" + ", ".join(out) + "]" if out else "[nominal]"
-
-
 def _rate_clause(step: float, udot_max: float, dt: float, unit: str) -> str:
     """The verdict's input-rate clause: proved (the certificate's own bound on the input
     steps keeps the envelope it assumed, so the assumption holds once the loop is in
@@ -694,48 +560,9 @@ def _rate_clause(step: float, udot_max: float, dt: float, unit: str) -> str:
     )
 
 
-def _contraction(
-    ell: _Ellipsoids, a: float | None, spec: float, c: np.ndarray, *, first: bool = False
-):
-    """``(solution, a)``: at the given contraction, or the one with the smallest bound
-    (``first``: the fastest feasible contraction of the grid)."""
-    if a is not None:
-        av = real(a, "a", within=CONTRACTION)
-        return ell.attempt(av, c), av
-    # the contraction on x = log(1 - a): a coarse grid, then golden section
-    rad = spec**2
-    lo, hi = math.log(1e-5), math.log(1 - rad)
-    best = None
-    cache: dict[float, Any] = {}
-    if first:
-        # the grid from its fast end (the contraction nearest the spectral radius): the
-        # first feasible point (the solver may fail at a point between feasible ones, so
-        # no bisection)
-        for x in np.linspace(lo, hi, _A_GRID + 2)[-2:0:-1]:
-            av = 1 - math.exp(float(x))
-            sol = ell.attempt(av, c)
-            if sol.ok:
-                return sol, av
-        return None, math.nan
-
-    def f(x: float) -> float:
-        av = 1 - math.exp(x)
-        if x not in cache:
-            sol = ell.attempt(av, c)
-            cache[x] = (sol, av, sol.objective if sol.ok else math.inf)
-        return cache[x][2]
-
-    grid = np.linspace(lo, hi, _A_GRID + 2)[1:-1]
-    search_log_contraction(f, grid, _A_REFINE, lo=lo, hi=hi)
-    ok = [v for v in cache.values() if v[0].ok]
-    if ok:
-        best = min(ok, key=lambda v: v[2])
-    return (best[0], best[1]) if best else (None, math.nan)
-
-
 def _conclude(
     st: _Setup,
-    ell: _Ellipsoids,
+    ell: Ellipsoids,
     data: list[dict],
     solved: tuple[Any, float],
     hb: np.ndarray,
