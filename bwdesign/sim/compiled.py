@@ -116,6 +116,14 @@ def observer_batch(plant, consts, ref, noise, dist, out):
 
 
 @njit(cache=True, inline="always")
+def _plant_row(plant, i):
+    """Row ``i`` of ``plant`` as a tuple (its entries stay in registers over the run) and
+    its velocity limit."""
+    r = plant[i]
+    return (r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], r[9], r[10]), r[11]
+
+
+@njit(cache=True, inline="always")
 def _plant_step(p, x1, x2, x3, uprev, applied, ud):
     """The true plant's jump and ZOH step (``p``: a row of ``plant`` as a tuple), as
     :func:`bwdesign.sim.kernel.advance`: the linear part sees ``ud``, the hysteresis ``u``."""
@@ -146,10 +154,7 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
          model[8], model[9], model[10])  # fmt: skip
     rows = dist.shape[0]
     for i in range(plant.shape[0]):
-        # the row as a tuple: its entries stay in registers over the run
-        pr = plant[i]
-        p = (pr[0], pr[1], pr[2], pr[3], pr[4], pr[5], pr[6], pr[7], pr[8], pr[9], pr[10])
-        vlim = pr[11]
+        p, vlim = _plant_row(plant, i)
         x1, x2, x3 = start[0], start[1], start[2]
         h1, h2, h3 = start[3], start[4], start[5]
         hd = 0.0
@@ -238,10 +243,7 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
     delay, limit, noisy = flags[0] != 0.0, flags[1], flags[2] != 0.0
     rows = dist.shape[0]
     for i in range(plant.shape[0]):
-        # the row as a tuple: its entries stay in registers over the run
-        pr = plant[i]
-        p = (pr[0], pr[1], pr[2], pr[3], pr[4], pr[5], pr[6], pr[7], pr[8], pr[9], pr[10])
-        vlim = pr[11]
+        p, vlim = _plant_row(plant, i)
         x1, x2, x3 = start[0], start[1], start[2]
         up = ua = start[3]
         q = start[4]
