@@ -174,21 +174,7 @@ def discretize(params: BoucWenParams, dt: float) -> ZOHModel:
         Sample time (s), see :func:`check_sample_time`.
     """
     dt = check_sample_time(params, dt)
-    a1, a2, a3 = params.a1, params.a2, params.a3
-    # Augmented exponential of d/dt [x1, x2, x3, u] with x3 and u constant,
-    # balanced by D = diag(1, w0, 1, a1/a3), w0 = sqrt(a1), so every entry is
-    # O(w0) (a1 ranges over 1e3..1e9 and would otherwise dominate the scaling).
-    w0 = math.sqrt(a1)
-    D = np.array([1.0, w0, 1.0, a1 / a3])
-    Mz = np.array(
-        [
-            [0.0, w0, 0.0, 0.0],
-            [-w0, -a2, -w0, w0],
-            [0.0, 0.0, 0.0, 0.0],
-            [0.0, 0.0, 0.0, 0.0],
-        ]
-    )
-    E = D[:, None] * expm(Mz * dt) / D[None, :]
+    E = zoh_exponentials(np.array([params.a1]), np.array([params.a2]), np.array([params.a3]), dt)[0]
     F = E[:3, :3].copy()
     g = E[:3, 3].copy()
     F[2] = (0.0, 0.0, 1.0)
@@ -196,6 +182,30 @@ def discretize(params: BoucWenParams, dt: float) -> ZOHModel:
     F.setflags(write=False)
     g.setflags(write=False)
     return ZOHModel(F=F, g=g, dt=dt)
+
+
+def zoh_exponentials(a1: np.ndarray, a2: np.ndarray, a3: np.ndarray, dt: float) -> np.ndarray:
+    """The exact ZOH exponentials of many linear parts at once, shape ``(N, 4, 4)``.
+
+    Row ``i`` is ``expm`` of the augmented matrix of ``d/dt [x1, x2, x3, u]`` (``x3`` and
+    ``u`` constant) of the plant ``(a1[i], a2[i], a3[i])``, balanced by ``D = diag(1, w0,
+    1, a1/a3)``, ``w0 = sqrt(a1)``, so every entry is ``O(w0)`` (``a1`` ranges over
+    1e3..1e9 and would otherwise dominate the scaling), and scaled back. One stacked
+    ``expm`` (scipy's is per matrix, so each row equals the single plant's to the bit):
+    :func:`discretize` takes its matrices from here, and so does a batch of true plants
+    (:func:`bwdesign.sim.zoh.true_matrices`), so both step the same numbers. ``dt`` is
+    not checked here (:func:`check_sample_time`).
+    """
+    a1, a2, a3 = (np.asarray(x, dtype=float) for x in (a1, a2, a3))
+    w0 = np.sqrt(a1)
+    D = np.stack([np.ones_like(a1), w0, np.ones_like(a1), a1 / a3], axis=1)
+    Mz = np.zeros((a1.size, 4, 4))
+    Mz[:, 0, 1] = w0
+    Mz[:, 1, 0] = -w0
+    Mz[:, 1, 1] = -a2
+    Mz[:, 1, 2] = -w0
+    Mz[:, 1, 3] = w0
+    return D[:, :, None] * expm(Mz * dt) / D[:, None, :]
 
 
 def check_dt(dt: float) -> float:

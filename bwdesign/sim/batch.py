@@ -222,11 +222,16 @@ def _chunks(run: Run, noise_std: np.ndarray, seeds, dist):
     step = max(1, _CHUNK_VALUES // max(n, 1)) if noisy or dist is not None else N
     for lo in range(0, N, step):
         hi = min(N, lo + step)
-        noise = np.zeros((hi - lo, n) if noisy else (1, 1))
+        noise = np.empty((hi - lo, n) if noisy else (1, 1))
         for i in range(lo, hi) if noisy else ():
+            row = noise[i - lo]
             if noise_std[i] > 0:
-                rng = np.random.default_rng(int(seeds[i]))
-                noise[i - lo] = noise_std[i] * rng.standard_normal(n)
+                # drawn into the row and scaled there: the same numbers as simulate's
+                # noise_std * standard_normal(n), without two temporaries per scenario
+                np.random.default_rng(int(seeds[i])).standard_normal(n, out=row)
+                row *= noise_std[i]
+            else:
+                row[:] = 0.0
         d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(dist[:, lo:hi].T)
         yield lo, hi, noise if noisy else np.zeros((1, 1)), d, noisy
 

@@ -71,20 +71,23 @@ def _clip(v, lo, hi):
     return v
 
 
-@njit(cache=True)
-def _law(law, lim, ff, xd, a, b, h, i, q):
+@njit(cache=True, inline="always")
+def _law(law, lim, ff, xd, a, b, h, q):
     """:func:`bwdesign.sim.kernel._law` without the jump: ``(v, q)``.
 
-    ``law`` = kx1, kx2, kx3, ki, cdt, ulo, uhi, integral, clip; ``lim`` the estimate limits.
+    ``law`` = kx1, kx2, kx3, ki, cdt, ulo, uhi, integral, clip and ``lim`` the estimate
+    limits, as tuples; ``ff``, ``xd`` this sample's reference terms. Scalars only: an
+    array passed to a function inside the loop costs a reference count up and down per
+    call (atomic operations that were 40 % of the step, issue 28).
     """
     if law[8] != 0.0:
         a = _clip(a, lim[0], lim[1])
         b = _clip(b, lim[2], lim[3])
         h = _clip(h, lim[4], lim[5])
-    f = ff[i] + law[3] * q
+    f = ff + law[3] * q
     v = f + law[0] * a + law[1] * b + law[2] * h
     if law[7] != 0.0:
-        q = q + law[4] * (a - xd[i])
+        q = q + law[4] * (a - xd)
     return _clip(v, law[5], law[6]), q
 
 
@@ -153,6 +156,8 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
     m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
          model[8], model[9], model[10])  # fmt: skip
     rows = dist.shape[0]
+    lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
+    lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
     for i in range(plant.shape[0]):
         p, vlim = _plant_row(plant, i)
         x1, x2, x3 = start[0], start[1], start[2]
@@ -189,11 +194,11 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 m1, m2, m3 = max(m1, abs(d1)), max(m2, abs(d2)), max(m3, abs(d3))
             u_next = 0.0
             if not delay:
-                applied, q = _law(law, lim, ff, xd, h1, h2, hw, k, q)
+                applied, q = _law(lw, lm, ff[k], xd[k], h1, h2, hw, q)
             else:
                 applied = ua
                 if not compensate:
-                    u_next, q = _law(law, lim, ff, xd, h1, h2, hw, k, q)
+                    u_next, q = _law(lw, lm, ff[k], xd[k], h1, h2, hw, q)
             uprev = up
             ud = applied + dist[drow, k] if rows > 0 else applied
             x1, x2, x3 = _plant_step(p, x1, x2, x3, uprev, applied, ud)
@@ -206,10 +211,10 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
             hw = g3 + hd if four else g3
             if delay:
                 if compensate:
-                    u_next, q = _law(law, lim, ff, xd, h1, h2, hw, k + 1, q)
+                    u_next, q = _law(lw, lm, ff[k + 1], xd[k + 1], h1, h2, hw, q)
                 ua = u_next
             up = applied
-            if applied <= law[5] or applied >= law[6]:
+            if applied <= lw[5] or applied >= lw[6]:
                 sat += 1.0
             if inw:
                 dum = max(dum, abs(applied - uprev))
