@@ -629,3 +629,15 @@ def test_sweep_runs_the_disturbance_observer(tune):
         seeds=sc["noise_seed"],
     )
     np.testing.assert_array_equal(table["me"][table["observer"] == "phdo"], ref.me)
+
+
+@pytest.mark.parametrize(
+    "seed, n, scale", [(0, 0, 0.02), (1, 1, 1.0), (7, 5001, 0.02), (2**40, 333, 3.5)]
+)
+def test_compiled_noise_is_numpys(seed, n, scale):
+    """The batch draws its noise with numba's Generator: numpy's numbers, to the bit."""
+    from bwdesign.sim.compiled import scaled_normals
+
+    out = np.full(n, np.nan)
+    scaled_normals(np.random.default_rng(seed), out, scale)
+    assert np.array_equal(out, scale * np.random.default_rng(seed).standard_normal(n))

