@@ -25,7 +25,8 @@ delta``. The model error is an *input driven by the state and the reference*:
 its state-dependent part ``(Fm - Fv)[:, :2] delta`` stays in the vertex's system
 matrix, the rest is exogenous: the reference terms (bounded at every time ``t >= 0`` per
 vertex by :func:`~bwdesign.model.reference_cover.sup_abs`), ``|x3| <= h_max``,
-``|j| <= (alpha + (|beta| + |gamma|) h_max) |du|``,
+``|j| <= hi |du|`` (``hi = alpha + (beta - gamma) h_max``, the largest slope of the jump,
+:func:`~bwdesign.model.plant.hysteresis_slope_range`),
 ``|dh| <= (|dalpha| + (|dbeta| + |dgamma|) h_max) |du| exp((|beta| + |gamma|) |du|)``
 (Gronwall) with ``|du| <= udot_max dt``, and ``|n| <= noise_max``.
 
@@ -123,7 +124,7 @@ from ..control.controllers import DiscreteTrackingController
 from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import discretize
+from ..model.plant import discretize, hysteresis_slope_range
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
@@ -209,7 +210,7 @@ def _matrices(lp: _Loop, Fv, gv, rho: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _hyst_bounds(model: BoucWenParams, tp: BoucWenParams, du: float) -> tuple[float, float, float]:
     hv = tp.bounded_class().h_max
-    j = (tp.alpha + (abs(tp.beta) + abs(tp.gamma)) * hv) * du
+    j = hysteresis_slope_range(tp)[1] * du
     return hv, j, jump_mismatch(model, tp, du)
 
 

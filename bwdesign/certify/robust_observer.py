@@ -78,7 +78,7 @@ from scipy.linalg import matrix_balance, solve_discrete_lyapunov
 
 from ..errors import InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import check_sample_time, discretize
+from ..model.plant import check_sample_time, discretize, hysteresis_slope_range
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
 from ..observers.gains import as_gains, check_gains, discrete_gains
 from ..validate import NONNEGATIVE, SEED, SIGNAL, UDOT_MAX, integer, real
@@ -248,7 +248,8 @@ def _mismatch_bound(
     Per component the smaller of two valid bounds: the amplitude one ``|m_c| + l1(h^u)
     u_r + l1(h^w) h_max`` and the rate one (summation by parts, ``S = sum h``):
     ``|S^u u_c| + |S^u| u_r + |S^w| h_max + l1(S - S_i)^u |dv| + l1(S - S_i)^w |dw|``
-    with ``|dw| <= (alpha + (|beta| + |gamma|) h_max) |du|`` the plant's jump. ``u_range``
+    with ``|dw| <= hi |du|`` the plant's jump (``hi`` from
+    :func:`~bwdesign.model.plant.hysteresis_slope_range`). ``u_range``
     and ``dv`` are of the input the plant's linear part sees (``u + d``), ``du`` of ``u``.
     """
     u_lo, u_hi = u_range
@@ -259,7 +260,7 @@ def _mismatch_bound(
     dPhi = Phim - Phiv
     uc, ur = (u_hi + u_lo) / 2, (u_hi - u_lo) / 2
     hv = tp.bounded_class().h_max
-    dw = (tp.alpha + (abs(tp.beta) + abs(tp.gamma)) * hv) * du
+    dw = hysteresis_slope_range(tp)[1] * du
     w0 = math.sqrt(tp.a1)
     R = np.linalg.inv(np.eye(2) - Phiv)
     Su = dPhi @ R @ buv + (bum - buv)  # steady gains, so m_c = Su u_c

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams
-from ..model.plant import discretize
+from ..model.plant import discretize, hysteresis_slope_range
 from ..validate import Range, real
 from .baselines import BaselineController
 
@@ -58,11 +58,9 @@ _GRID = 4000
 
 
 def slope_range(params: BoucWenParams) -> tuple[float, float]:
-    """The slope ``dh/du`` over the bounded class: ``(0, alpha + (beta - gamma) h_max)``."""
-    bc = params.bounded_class()
-    if not bc.bounded:
-        return (params.alpha, params.alpha)
-    return (0.0, params.alpha + (params.beta - params.gamma) * bc.h_max)
+    """The slope ``dh/du`` over the bounded class: ``(0, alpha + (beta - gamma) h_max)``
+    (:func:`bwdesign.model.plant.hysteresis_slope_range`)."""
+    return hysteresis_slope_range(params)
 
 
 def sampled_plant(

@@ -34,6 +34,7 @@ __all__ = [
     "phi",
     "rhs",
     "hysteresis_increment",
+    "hysteresis_slope_range",
     "zoh_step",
     "simulate_zoh",
     "check_sample_time",
@@ -138,6 +139,32 @@ def hysteresis_increment(params: BoucWenParams, h: float, u0: float, u1: float) 
             return s * _branch(g, w, alpha, cm)
         g, w = 0.0, w - wz
     return s * _branch(g, w, alpha, params.beta + params.gamma)
+
+
+def hysteresis_slope_range(params: BoucWenParams) -> tuple[float, float]:
+    """The range of ``dx3/du`` along any input path: ``|x3(u1) - x3(u0)| <= hi |u1 - u0|``.
+
+    Along a monotone path of direction ``s``, ``g = s x3`` obeys ``dg/dw = alpha - c g``
+    (``w = |u - u0|``) with ``c = beta + gamma`` for ``g >= 0`` and ``beta - gamma`` for
+    ``g < 0`` (:func:`hysteresis_increment`). In the bounded class (``alpha > 0``,
+    ``beta + gamma > 0``, ``beta - gamma >= 0``) with ``|x3| <= h_max = alpha / (beta +
+    gamma)`` that is in ``[0, alpha]`` for ``g >= 0`` and in ``[alpha, alpha + (beta -
+    gamma) h_max]`` for ``g < 0``: the range is ``(0, alpha + (beta - gamma) h_max)``,
+    ``hi = 2 alpha beta / (beta + gamma)``. Outside the bounded class (no ``h_max``):
+    ``(alpha, alpha)``, the slope at ``x3 = 0``.
+
+    Examples
+    --------
+    >>> from bwdesign.model.params import preset
+    >>> p = preset("paper_experiment")
+    >>> lo, hi = hysteresis_slope_range(p)
+    >>> lo, abs(hi - 2 * p.alpha * p.beta / (p.beta + p.gamma)) < 1e-12
+    (0.0, True)
+    """
+    bc = params.bounded_class()
+    if not bc.bounded:
+        return (params.alpha, params.alpha)
+    return (0.0, params.alpha + (params.beta - params.gamma) * bc.h_max)
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..errors import GainError, InputError
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import check_dt, discretize, zoh_step
+from ..model.plant import check_dt, discretize, hysteresis_slope_range, zoh_step
 from ..validate import POSITIVE, UDOT_MAX, real
 from .base import (
     as_inputs,
@@ -58,12 +58,11 @@ __all__ = ["UnscentedObserver", "default_noise", "max_hysteresis_slope"]
 def max_hysteresis_slope(params: BoucWenParams) -> float:
     """Upper bound of ``|dh/du|`` over the bounded hysteresis range (length unit/V).
 
-    ``alpha + |beta - gamma| h_max`` with ``h_max = alpha/(beta + gamma)``; for a
-    model outside the bounded class (no ``h_max``) it is ``alpha``.
+    ``alpha + (beta - gamma) h_max`` with ``h_max = alpha/(beta + gamma)``; for a
+    model outside the bounded class (no ``h_max``) it is ``alpha``
+    (:func:`bwdesign.model.plant.hysteresis_slope_range`).
     """
-    verdict = params.bounded_class()
-    h_max = verdict.h_max if verdict.bounded else 0.0
-    return params.alpha + abs(params.beta - params.gamma) * h_max
+    return hysteresis_slope_range(params)[1]
 
 
 def default_noise(
