@@ -215,3 +215,31 @@ def test_zero_crossing_inside_the_jump(experiment):
 
 def test_no_jump_returns_state(experiment):
     assert hysteresis_increment(experiment, 0.37, 12.0, 12.0) == 0.37
+
+
+def test_hysteresis_slope_range_bounds_every_jump_and_is_attained():
+    """|H(h, u0, u1) - h| <= hi |u1 - u0| for |h| <= h_max over random bounded plants, and
+    the bound is reached (a small jump away from h = -h_max has slope hi)."""
+    from bwdesign.model.plant import hysteresis_slope_range
+
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        beta = rng.uniform(0.01, 2.0)
+        gamma = rng.uniform(-beta, beta)  # the bounded class: beta - gamma >= 0, beta + gamma > 0
+        p = BoucWenParams(a1=1e5, a2=500.0, a3=1e5, alpha=rng.uniform(0.05, 5.0), beta=beta,
+                          gamma=gamma)  # fmt: skip
+        lo, hi = hysteresis_slope_range(p)
+        hm = p.bounded_class().h_max
+        assert lo == 0.0 and hi == pytest.approx(2 * p.alpha * beta / (beta + gamma))
+        for _ in range(50):
+            h = rng.uniform(-hm, hm)
+            u0 = rng.uniform(-50, 50)
+            u1 = u0 + rng.choice([-1, 1]) * 10 ** rng.uniform(-6, 1)
+            j = hysteresis_increment(p, h, u0, u1) - h
+            assert abs(j) <= hi * abs(u1 - u0) * (1 + 1e-12) + 1e-15
+            assert j * (u1 - u0) >= 0  # the slope is never negative
+        w = 1e-7
+        assert (hysteresis_increment(p, -hm, 0.0, w) + hm) / w == pytest.approx(hi, rel=1e-5)
+    # outside the bounded class: alpha
+    q = BoucWenParams(a1=1e5, a2=500.0, a3=1e5, alpha=0.5, beta=0.1, gamma=0.3)
+    assert hysteresis_slope_range(q) == (0.5, 0.5)
