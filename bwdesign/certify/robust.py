@@ -356,6 +356,7 @@ def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max:
     peaks = [(cov, dd, l1) for cov, dd in covers if (l1 := plant_peaks(st, dd, cov[1])) is not None]
     quick = a is None and bool(peaks)
     sol, av = contraction(ell, a, spec, st.statics[0], first=quick)
+    sol = ell.firm(sol, av, st.statics[0], st, data)  # a larger margin if the check fails
     if (
         quick
         and sol is not None
@@ -363,6 +364,7 @@ def _certify_with(st: _Setup, data: list[dict], n_v: int, covered, a, noise_max:
         and not all(m.passed for m in ell.check(sol, av, st, data)[0])
     ):
         sol, av = contraction(ell, a, spec, st.statics[0])  # the full search after all
+        sol = ell.firm(sol, av, st.statics[0], st, data)
     if sol is None or not sol.ok:
         status = sol.status if sol is not None else "infeasible for every contraction tried"
         why = (
