@@ -295,3 +295,36 @@ def test_a_phso_loop_that_chatters_at_a_corner_is_certified_only_at_the_rate_it_
     if c["holds"]:
         assert d.certificate.details["udot_max"] == c["envelope"]
         assert c["tracking_bound"] >= c["simulated_maxe"]
+
+
+def test_a_design_with_sensor_noise_takes_its_envelope_from_the_noisy_corners():
+    """With noise_max > 0 the corners are simulated with noise at that bound (+-noise_max,
+    bounded noise): the certificate's envelope must cover the input rate noise causes,
+    not the noise-free one (the audit: 3 694 V/s certified, 11 351 V/s reached)."""
+    from bwdesign.sim.corners import simulate_corners
+
+    p = _custom()
+    box = _box(a1=0.02, a3=0.02)
+    one = RobustSearch(max_candidates=1)
+    kw = dict(dt=DT, uncertainty=box, udot_max=UDOT, reference=REF, search=one)
+    noisy = synthesize_robust(p, noise_max=0.3, **kw).candidates[0]
+    quiet = synthesize_robust(p, **kw).candidates[0]
+    assert noisy["simulated_udot_max"] > quiet["simulated_udot_max"]
+    assert noisy["envelope"] >= noisy["simulated_udot_max"]
+    loop = ClosedLoop(
+        p,
+        ObserverSpec.of("phdo", noisy["gains"]),
+        make_controller(
+            p,
+            noisy["lambda"],
+            noisy["lambda"],
+            form="discrete",
+            dt=DT,
+            integral_rate=noisy["integral_rate"],
+        ),  # fmt: skip
+        dt=DT,
+        delay=True,
+        compensate_delay=True,
+    )
+    rates = simulate_corners(loop.replace(start=_start(loop.controller)), box, REF, noise_max=0.3)
+    assert noisy["simulated_udot_max"] == pytest.approx(float(np.max(rates.input_rate_max)))

@@ -641,3 +641,54 @@ def test_compiled_noise_is_numpys(seed, n, scale):
     out = np.full(n, np.nan)
     scaled_normals(np.random.default_rng(seed), out, scale)
     assert np.array_equal(out, scale * np.random.default_rng(seed).standard_normal(n))
+
+
+@pytest.mark.parametrize("observer", ["phso", "baseline"])
+def test_bounded_noise_is_at_its_bound_and_the_batch_matches_simulate(tune, observer):
+    """noise_kind="bounded": +-noise_std at every sample (the bound a certificate covers),
+    drawn from the same seed; the batch equals simulate to the bit, as for Gaussian noise."""
+    from bwdesign import tune_baseline
+
+    tps, _ = _mismatched(3, seed=4)
+    ref = Sine(amplitude=60, offset=80, frequency=2)
+    if observer == "baseline":
+        loop = ClosedLoop(P, None, tune_baseline(P, DT), dt=DT)
+    else:
+        ctl = DiscreteTrackingController(
+            P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
+        )
+        loop = _loop(ctl, observer, tune.gains)
+    kw = dict(duration=0.5, noise_std=0.02, noise_kind="bounded")
+    b = simulate_batch(loop, ref, tps, seeds=[3, 4, 5], **kw)
+    for i, tp in enumerate(tps):
+        r = simulate(loop, ref, true_params=tp, seed=3 + i, **kw)
+        noise = np.asarray(r.z) - np.asarray(r.x)[:, 0]
+        assert np.allclose(np.abs(noise), 0.02, rtol=1e-9)  # z = x1 + n, rounded
+        assert r.settings["noise_kind"] == "bounded" and b.settings["noise_kind"] == "bounded"
+        assert [float(b.me[i]), float(b.maxe[i]), float(b.rmse[i])] == [
+            r.metrics.me,
+            r.metrics.maxe,
+            r.metrics.rmse,
+        ]
+    gauss = simulate(loop, ref, true_params=tps[0], seed=3, duration=0.5, noise_std=0.02)
+    assert gauss.metrics.maxe != b.maxe[0]
+    with pytest.raises(InputError, match="noise_kind"):
+        simulate(loop, ref, duration=0.5, noise_kind="uniform")
+    with pytest.raises(InputError, match="noise_kind"):
+        simulate_batch(loop, ref, tps, duration=0.5, noise_kind="uniform")
+
+
+def test_corners_with_noise_at_the_bound_move_the_input_faster(tune):
+    """A certificate with |n| <= noise_max must face the input rate that noise causes:
+    simulate_corners(noise_max=...) runs it (bounded noise), the design's envelope reads it."""
+    ctl = DiscreteTrackingController(
+        P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
+    )
+    loop = _loop(ctl, "phdo", tune.gains, start=ON_REFERENCE)
+    ref = Sine(amplitude=60, offset=80, frequency=2)
+    from bwdesign.sim.corners import simulate_corners
+
+    quiet = simulate_corners(loop, BOX, ref)
+    noisy = simulate_corners(loop, BOX, ref, noise_max=0.2)
+    assert noisy.settings["noise_kind"] == "bounded"
+    assert np.max(noisy.input_rate_max) > 1.2 * np.max(quiet.input_rate_max)

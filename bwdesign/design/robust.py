@@ -241,9 +241,11 @@ def _loop(rq: _Request, c: dict[str, Any]) -> ClosedLoop:
 
 
 def _corners(rq: _Request, c: dict[str, Any]) -> dict[str, Any]:
-    """Worst tracking error and input rate simulated at the box's corners."""
+    """Worst tracking error and input rate simulated at the box's corners, with sensor noise
+    at the certificate's bound (its input moves faster with noise: the envelope must
+    cover that)."""
     loop = _loop(rq, c)
-    res = simulate_corners(loop, rq.box, rq.reference)
+    res = simulate_corners(loop, rq.box, rq.reference, noise_max=rq.noise_max)
     if not res.stable.all():
         return {"simulated_maxe": None, "simulated_udot_max": None}
     return {

@@ -10,7 +10,8 @@ saturation and estimate clipping) for ``N`` scenarios. The sample step is
 matrices (:func:`bwdesign.sim.zoh.true_matrices`), the metrics added in the same order
 (:func:`bwdesign.sim.metrics.running_sum`), so each scenario's metrics equal
 :func:`simulate`'s on the same inputs to the bit (tested); the noise of scenario ``i``
-is ``noise_std[i] * default_rng(seeds[i]).standard_normal(n)``, exactly as
+is ``noise_std[i] * default_rng(seeds[i]).standard_normal(n)`` (or its sign, for a
+bounded noise: :func:`bwdesign.sim.run.sensor_noise`), exactly as
 :func:`simulate` draws it, scenarios taken in groups so that at most a few million
 noise values are held at once.
 
@@ -40,6 +41,7 @@ from ..observers.spec import GAIN_KINDS
 from .closed_loop import baseline_feedforward
 from .kernel import SCALAR, LoopConstants, discrete_observer_gains, hysteresis_increment_batch
 from .run import Run, disturbance_samples, diverged, prepare, resolve_window
+from .run import noise_kind as check_noise_kind
 from .zoh import true_matrices
 
 __all__ = ["BatchResult", "simulate_batch", "hysteresis_increment_batch"]
@@ -116,6 +118,7 @@ def simulate_batch(
     seeds: Any = 0,
     window: Any = None,
     input_disturbance: Any = None,
+    noise_kind: str = "gaussian",
 ) -> BatchResult:
     """Run the sampled loop ``loop`` for every true parameter set in ``true_params``.
 
@@ -140,6 +143,8 @@ def simulate_batch(
     input_disturbance : callable or array_like, optional
         The plant's input disturbance, as for :func:`simulate`: common to every
         scenario (``n`` samples) or one row per scenario (shape ``(N, n)``).
+    noise_kind : {"gaussian", "bounded"}
+        As for :func:`simulate` (:data:`bwdesign.sim.run.NOISE_KINDS`).
 
     Returns
     -------
@@ -160,15 +165,14 @@ def simulate_batch(
     seeds = np.broadcast_to(np.asarray(seeds), (N,))
     if seeds.dtype.kind not in "iu" or np.any(seeds < 0):
         raise InputError("seeds must be integers >= 0")
+    noise = (noise_std, seeds, check_noise_kind(noise_kind))
     t = run.t
     win = resolve_window(t, reference, window)
     in_win = (t >= win[0] - 1e-12) & (t <= win[1] + 1e-12)
     if not np.any(in_win):
         raise InputError(f"window {win} holds no sample")
     dist = disturbance_samples(input_disturbance, run, N)
-    acc = (_run_batch_baseline if loop.baseline else _run_batch)(
-        run, in_win, noise_std, seeds, dist
-    )
+    acc = (_run_batch_baseline if loop.baseline else _run_batch)(run, in_win, noise, dist)
     stable = acc["alive"].copy()
     count = acc["count"]
     settings = {
@@ -185,6 +189,8 @@ def simulate_batch(
         "xhat0": list(run.start.xhat0),
         "u_prev": run.start.u_prev,
     }
+    if noise[2] != "gaussian":
+        settings["noise_kind"] = noise[2]
     return BatchResult(
         stable=stable,
         status=tuple(acc["status"]),
@@ -210,31 +216,40 @@ def _plant_rows(T: dict[str, np.ndarray], limit: float) -> np.ndarray:
     return np.ascontiguousarray(np.stack(cols, axis=1), dtype=float)
 
 
-def _chunks(run: Run, noise_std: np.ndarray, seeds, dist):
+def _chunks(run: Run, noise: tuple, dist):
     """Scenario ranges of at most ``_CHUNK_VALUES`` noise values:
     ``(lo, hi, noise, dist, noisy)``.
 
-    Scenario ``i``'s noise is ``noise_std[i] * default_rng(seeds[i]).standard_normal(n)``,
-    as :func:`simulate` draws it; ``dist`` rows are scenarios (none, or one per scenario).
+    ``noise`` = ``(noise_std, seeds, kind)``; scenario ``i``'s noise is
+    :func:`~.run.sensor_noise` of ``noise_std[i]`` and ``seeds[i]``, as :func:`simulate`
+    draws it; ``dist`` rows are scenarios (none, or one per scenario).
     """
     from .compiled import scaled_normals  # here: numba is loaded by a batch only
 
+    noise_std, seeds, kind = noise
     n, N = run.n, noise_std.size
     noisy = bool(np.any(noise_std > 0))
     step = max(1, _CHUNK_VALUES // max(n, 1)) if noisy or dist is not None else N
     for lo in range(0, N, step):
         hi = min(N, lo + step)
-        noise = np.empty((hi - lo, n) if noisy else (1, 1))
+        rows = np.empty((hi - lo, n) if noisy else (1, 1))
         for i in range(lo, hi) if noisy else ():
-            row = noise[i - lo]
-            if noise_std[i] > 0:
-                # numba's Generator draws numpy's numbers (the same PCG64 and ziggurat), 1.6x
-                # faster, straight into the row: simulate's noise_std * standard_normal(n)
-                scaled_normals(np.random.default_rng(int(seeds[i])), row, float(noise_std[i]))
-            else:
+            row = rows[i - lo]
+            std = float(noise_std[i])
+            if std <= 0:
                 row[:] = 0.0
+                continue
+            # numba's Generator draws numpy's numbers (the same PCG64 and ziggurat), 1.6x
+            # faster, straight into the row: sensor_noise's std * standard_normal(n)
+            rng = np.random.default_rng(int(seeds[i]))
+            if kind == "gaussian":
+                scaled_normals(rng, row, std)
+            else:  # std * sign(standard_normal(n))
+                scaled_normals(rng, row, 1.0)
+                np.sign(row, out=row)
+                row *= std
         d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(dist[:, lo:hi].T)
-        yield lo, hi, noise if noisy else np.zeros((1, 1)), d, noisy
+        yield lo, hi, rows if noisy else np.zeros((1, 1)), d, noisy
 
 
 def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, count: int):
@@ -261,7 +276,7 @@ def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, 
     }
 
 
-def _run_batch_baseline(run: Run, in_win: np.ndarray, noise_std, seeds, dist) -> dict:
+def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     """A baseline loop for every scenario (:func:`.compiled.baseline_batch`)."""
     from .compiled import baseline_batch  # here: numba is loaded by a batch only
 
@@ -280,16 +295,16 @@ def _run_batch_baseline(run: Run, in_win: np.ndarray, noise_std, seeds, dist) ->
     x0 = [float(v) for v in start.x0]
     st = np.array([*x0, float(start.u_prev), float(q0)])
     out = np.zeros((N, 20))
-    for lo, hi, noise, d, noisy in _chunks(run, noise_std, seeds, dist):
+    for lo, hi, rows, d, noisy in _chunks(run, noise, dist):
         flags = np.array([float(bool(loop.delay)), limit, float(noisy)])
-        baseline_batch(plant[lo:hi], law, ref, flags, st, noise, d, out[lo:hi])
+        baseline_batch(plant[lo:hi], law, ref, flags, st, rows, d, out[lo:hi])
     acc = _finish(out, T, limit, dt, int(np.count_nonzero(in_win)))
     nan = np.full(N, np.nan)
     acc.update(est_sq=[nan] * 3, est_max=[nan] * 3)
     return acc
 
 
-def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds, dist) -> dict:
+def _run_batch(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     """The loop for every scenario (:func:`.compiled.observer_batch`, the step of
     :mod:`bwdesign.sim.kernel` compiled)."""
     from .compiled import observer_batch  # here: numba is loaded by a batch only
@@ -315,11 +330,11 @@ def _run_batch(run: Run, in_win: np.ndarray, noise_std: np.ndarray, seeds, dist)
     st = np.array([*(float(v) for v in start.x0), *(float(v) for v in start.xhat0)] + [0.0])
     st[6] = float(start.u_prev)
     out = np.zeros((N, 20))
-    for lo, hi, noise, d, noisy in _chunks(run, noise_std, seeds, dist):
+    for lo, hi, rows, d, noisy in _chunks(run, noise, dist):
         flags = np.array(
             [float(c.four), float(c.phso), float(bool(c.delay)), float(bool(c.compensate)),
              limit, float(noisy)]
         )  # fmt: skip
         consts = (model, gains, law, lim, flags, st)
-        observer_batch(plant[lo:hi], consts, ref, noise, d, out[lo:hi])
+        observer_batch(plant[lo:hi], consts, ref, rows, d, out[lo:hi])
     return _finish(out, T, limit, dt, int(np.count_nonzero(in_win)))

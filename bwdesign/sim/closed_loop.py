@@ -32,7 +32,8 @@ from .kernel import (
     correct,
 )
 from .result import SimulationResult
-from .run import Run, disturbance_samples, diverged, finish, prepare
+from .run import Run, disturbance_samples, diverged, finish, prepare, sensor_noise
+from .run import noise_kind as check_noise_kind
 
 __all__ = ["simulate", "make_observer", "NOISE_STD"]
 
@@ -139,6 +140,7 @@ def simulate(
     window: Any = None,
     fast: bool = True,
     input_disturbance: Any = None,
+    noise_kind: str = "gaussian",
 ) -> SimulationResult:
     """Simulate the sampled-data tracking loop ``loop`` (see :mod:`bwdesign.sim`).
 
@@ -153,7 +155,8 @@ def simulate(
     true_params : BoucWenParams, optional
         The simulated plant, when it differs from the loop's model (model mismatch).
     noise_std : float
-        Sensor noise std (length unit), Gaussian, white at ``dt``.
+        Sensor noise std (length unit), Gaussian, white at ``dt``; with
+        ``noise_kind="bounded"`` its bound, ``+-noise_std`` at every sample.
     seed : int
         Seed of ``numpy.random.default_rng`` for the noise.
     window : (float, float), optional
@@ -169,6 +172,9 @@ def simulate(
         a3 (u + d)``; the hysteresis, the observer and the law see ``u`` only), held
         over each sample: ``d(t)`` called with the sample times, or the ``n`` samples
         (input unit). See :class:`~bwdesign.DisturbanceBound`.
+    noise_kind : {"gaussian", "bounded"}
+        The noise's kind (:data:`bwdesign.sim.run.NOISE_KINDS`): Gaussian, or
+        ``+-noise_std`` with a random sign at every sample (a bounded noise at its bound).
 
     Returns
     -------
@@ -195,8 +201,10 @@ def simulate(
     run = prepare(loop, reference, duration=duration, true_params=true_params)
     noise_std = real(noise_std, "noise_std", within=NOISE_STD)
     seed = integer(seed, "seed", within=SEED)
+    noise = sensor_noise(noise_std, seed, run.n, check_noise_kind(noise_kind))
     if run.loop.baseline:
-        return _simulate_baseline(run, noise_std, seed, window, input_disturbance, true_params)
+        drawn = (noise, noise_std, seed, noise_kind)
+        return _simulate_baseline(run, drawn, window, input_disturbance, true_params)
     loop = _ukf_envelope(run.loop, reference)
     start = run.start
     obs = make_observer(
@@ -210,8 +218,6 @@ def simulate(
     )
     ctrl = copy.deepcopy(loop.controller)  # its integrator (if any) must not leak between runs
     ctrl.reset()
-    rng = np.random.default_rng(seed)
-    noise = noise_std * rng.standard_normal(run.n) if noise_std > 0 else np.zeros(run.n)
     ref = run.reference_terms()
     dist = disturbance_samples(input_disturbance, run)
     # the kernel's switches come from the spec's kind: a custom object (even of a built-in
@@ -224,6 +230,8 @@ def simulate(
     rec["t"], rec["x_d"] = run.t[:m], ref[0][:m]
     settings = _settings(run, loop, obs, ctrl, noise_std, seed, true_params is not None)
     settings["path"] = path
+    if noise_kind != "gaussian":
+        settings["noise_kind"] = noise_kind
     if dist is not None:
         settings["input_disturbance_max"] = float(np.max(np.abs(dist)))
     return finish(run, rec, window=window, mode="sampled", settings=settings)
@@ -237,12 +245,13 @@ def baseline_feedforward(run: Run) -> np.ndarray:
     return loop.controller.feedforward_samples(run.reference, run.t + lead)
 
 
-def _simulate_baseline(run: Run, noise_std, seed, window, input_disturbance, true_params):
-    """:func:`simulate` for a baseline loop: :func:`~bwdesign.sim.kernel.advance_baseline`."""
+def _simulate_baseline(run: Run, drawn, window, input_disturbance, true_params):
+    """:func:`simulate` for a baseline loop: :func:`~bwdesign.sim.kernel.advance_baseline`;
+    ``drawn``: the noise samples, their std, seed and kind."""
     loop, n, dt = run.loop, run.n, run.loop.dt
     ctrl = loop.controller
-    rng = np.random.default_rng(seed)
-    noise = (noise_std * rng.standard_normal(n) if noise_std > 0 else np.zeros(n)).tolist()
+    noise, noise_std, seed, kind = drawn
+    noise = noise.tolist()
     ref = run.reference_terms()
     ff = baseline_feedforward(run)
     c = BaselineConstants(loop, ff, ref, SCALAR)
@@ -291,6 +300,8 @@ def _simulate_baseline(run: Run, noise_std, seed, window, input_disturbance, tru
         "u_prev": run.start.u_prev,
         "path": "baseline",
     }
+    if kind != "gaussian":
+        settings["noise_kind"] = kind
     if c.dist is not None:
         settings["input_disturbance_max"] = float(np.max(np.abs(c.dist)))
     return finish(run, rec, window=window, mode="sampled", settings=settings)

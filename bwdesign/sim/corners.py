@@ -35,6 +35,7 @@ def simulate_corners(
     box: UncertaintyBox,
     reference: Reference,
     disturbance: DisturbanceBound | None = None,
+    noise_max: float = 0.0,
 ) -> BatchResult:
     """``loop`` simulated at every corner of ``box`` (its start: usually on the reference).
 
@@ -44,9 +45,12 @@ def simulate_corners(
     measured, as the certificate covers every one. ``input_rate_max`` (over the same
     window) is what :func:`bwdesign.design.certified_envelope` compares with the
     envelope a robust certificate assumes. With a ``disturbance`` every corner runs
-    each of :func:`disturbance_signals` (four scenarios per corner).
+    each of :func:`disturbance_signals` (four scenarios per corner). With ``noise_max``
+    every scenario has sensor noise at that bound (``noise_kind="bounded"``: ``+-noise_max``
+    with a random sign at each sample, seeded by the scenario's index), as a certificate
+    with ``|n| <= noise_max`` must face it: its input moves faster than without noise.
     """
-    return simulate_plants(loop, box.vertices(loop.model), reference, disturbance)
+    return simulate_plants(loop, box.vertices(loop.model), reference, disturbance, noise_max)
 
 
 def simulate_plants(
@@ -54,6 +58,7 @@ def simulate_plants(
     plants: list,
     reference: Reference,
     disturbance: DisturbanceBound | None = None,
+    noise_max: float = 0.0,
 ) -> BatchResult:
     """:func:`simulate_corners` for any list of plants (duration, window, disturbance
     scenarios as there: ``len(plants) x`` the disturbance's signals, plant-major)."""
@@ -72,5 +77,13 @@ def simulate_plants(
         corners = [tp for tp in corners for _ in sig]
         dist = np.tile(sig, (len(corners) // len(sig), 1))
     return simulate_batch(
-        loop, reference, corners, duration=duration, window=window, input_disturbance=dist
+        loop,
+        reference,
+        corners,
+        duration=duration,
+        window=window,
+        input_disturbance=dist,
+        noise_std=noise_max,
+        seeds=np.arange(len(corners)),
+        noise_kind="bounded",
     )

@@ -28,6 +28,7 @@ from ..errors import InputError
 from ..model.params import MODEL_FIELDS, BoucWenParams
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox
+from ..validate import NONNEGATIVE, real
 from .corners import simulate_plants
 
 __all__ = ["Falsification", "falsify"]
@@ -71,8 +72,9 @@ class Falsification:
 class _Search:
     """The plants tried so far and their outcomes."""
 
-    def __init__(self, loop, box, reference, disturbance):
+    def __init__(self, loop, box, reference, disturbance, noise_max):
         self.loop, self.box, self.reference, self.dist = loop, box, reference, disturbance
+        self.noise_max = noise_max
         self.params = loop.model
         self.bounds = box.check(self.params, bounded=False)  # {name: (lo, hi)}, varying only
         self.names = list(self.bounds)
@@ -85,7 +87,7 @@ class _Search:
     def run(self, plants: list[BoucWenParams], how: str) -> None:
         if not plants:
             return
-        res = simulate_plants(self.loop, plants, self.reference, self.dist)
+        res = simulate_plants(self.loop, plants, self.reference, self.dist, self.noise_max)
         k = len(res.maxe) // len(plants)  # disturbance scenarios per plant
         for i, tp in enumerate(plants):
             sl = slice(i * k, (i + 1) * k)
@@ -124,6 +126,7 @@ def falsify(
     rounds: int = 3,
     per_round: int = 8,
     seed: int = 0,
+    noise_max: float = 0.0,
 ) -> Falsification:
     """Search the box for the loop's worst steady tracking error (see the module doc).
 
@@ -137,6 +140,10 @@ def falsify(
     interior, rounds, per_round : int
         Uniform interior plants; rounds of the evolution strategy and plants per round.
     seed : int
+    noise_max : float
+        Sensor noise at this bound on every plant (:func:`.corners.simulate_plants`:
+        ``+-noise_max`` with a seeded random sign per sample), as a certificate with
+        ``|n| <= noise_max`` covers it; 0: noise free.
 
     Returns
     -------
@@ -148,7 +155,8 @@ def falsify(
     if not isinstance(box, UncertaintyBox):
         raise InputError("box must be an UncertaintyBox")
     rng = np.random.default_rng(seed)
-    s = _Search(loop, box, reference, disturbance)
+    noise_max = real(noise_max, "noise_max", within=NONNEGATIVE)
+    s = _Search(loop, box, reference, disturbance, noise_max)
     s.run(box.vertices(loop.model), "corner")
     if s.names:
         s.run(box.sample(loop.model, rng, interior), "interior")

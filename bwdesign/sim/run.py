@@ -33,11 +33,35 @@ __all__ = [
     "diverged",
     "resolve_window",
     "disturbance_samples",
+    "sensor_noise",
+    "noise_kind",
+    "NOISE_KINDS",
     "DURATION",
 ]
 
 #: Supported run lengths (s).
 DURATION = Range(0.0, 1e7, lo_open=True, unit="s")
+#: The sensor noise of a run: ``"gaussian"``, ``noise_std`` times a standard normal per
+#: sample; ``"bounded"``, ``+-noise_std`` with the sign of that normal (white, and at the
+#: bound ``|n| <= noise_std`` of a certificate at every sample: what a certificate's
+#: envelope and its falsifier must face).
+NOISE_KINDS = ("gaussian", "bounded")
+
+
+def noise_kind(kind: Any) -> str:
+    """``kind`` checked against :data:`NOISE_KINDS` (``InputError`` otherwise)."""
+    if kind not in NOISE_KINDS:
+        raise InputError(f"noise_kind must be one of {', '.join(NOISE_KINDS)}, got {kind!r}")
+    return str(kind)
+
+
+def sensor_noise(noise_std: float, seed: int, n: int, kind: str = "gaussian") -> np.ndarray:
+    """The ``n`` noise samples of a run (:data:`NOISE_KINDS`), from
+    ``numpy.random.default_rng(seed)``; zeros for ``noise_std = 0``."""
+    if noise_std <= 0:
+        return np.zeros(n)
+    z = np.random.default_rng(seed).standard_normal(n)
+    return noise_std * (z if kind == "gaussian" else np.sign(z))
 
 
 @dataclass(frozen=True)
