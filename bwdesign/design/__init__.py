@@ -10,13 +10,16 @@
   (:func:`synthesize_robust`: candidates from the tuning, each simulated at the
   box's corners and certified by :func:`bwdesign.certify_robust`);
 - :mod:`.robust_observer`: observer gains minimising the robust observer
-  certificate's bound over a box (:func:`synthesize_robust_observer`).
+  certificate's bound over a box (:func:`synthesize_robust_observer`);
+- :mod:`.rate`: the envelope at which the robust loop certificate proves its own
+  input rate (:func:`prove_rate`).
 
 Certificates live in :mod:`bwdesign.certify` and simulation in :mod:`bwdesign.sim`;
 design imports both and neither imports design.
 """
 
 from .gains import default_pole_radius, synthesize
+from .rate import RateProof, prove_rate
 from .robust import (
     ENVELOPE_MARGIN,
     RobustDesign,
@@ -45,6 +48,8 @@ __all__ = [
     "MarginRequirements",
     "observer_gains",
     "synthesize_robust",
+    "prove_rate",
+    "RateProof",
     "RobustDesign",
     "RobustSearch",
     "certified_envelope",
