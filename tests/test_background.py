@@ -89,7 +89,7 @@ def test_study_with_two_workers_is_the_same_study():
             C._COMPUTE[part] = lambda r, f=f, part=part: (computed.append(part), f(r))[1]
         cfg = load_config("configs/paper_simulation_corrected.toml")
         from bwdesign.study.result import CERTIFICATE_PARTS
-        parts = CERTIFICATE_PARTS | {"verdict"}
+        parts = CERTIFICATE_PARTS
         one = C.study(cfg, parts=parts)
         here = list(computed)
         computed.clear()
@@ -111,3 +111,59 @@ def test_workers_checked():
     for bad in (0, 1.5, True, "2"):
         with pytest.raises(InputError, match="workers"):
             study(cfg, parts=("plant",), workers=bad)
+
+
+def test_the_error_is_the_one_the_order_of_parts_meets_first():
+    """With the second process, a failing part raises only after the BESIDE parts that
+    come before it in PARTS: the same error as computing the parts in order."""
+    got = _run(
+        """
+        import json
+        import bwdesign.study.compute as C
+        from bwdesign.model.config import load_config
+        def fail(name):
+            def f(r):
+                raise ValueError(name)
+            return f
+        C._COMPUTE["configured"] = fail("configured")
+        C._COMPUTE["tuning"] = fail("tuning")
+        cfg = load_config("configs/paper_simulation_corrected.toml")
+        out = {}
+        for w in (1, 2):
+            try:
+                C.study(cfg, parts=("configured", "tuning"), workers=w)
+            except ValueError as e:
+                out[w] = str(e)
+        print(json.dumps(out))
+        """
+    )
+    assert got == {"1": "configured", "2": "configured"}
+
+
+def test_figures_drawn_on_two_processes_are_the_same_and_failures_drawn_here(tmp_path):
+    got = _run(
+        f"""
+        import json, os
+        from pathlib import Path
+        from matplotlib.figure import Figure
+        from bwdesign.report.figures import FigureWriter
+        me = os.getpid()
+        def fig(k, fail_in_child=False):
+            def draw():
+                if fail_in_child and os.getpid() != me:
+                    raise RuntimeError("only in the child")
+                f = Figure(figsize=(2, 2))
+                f.subplots().plot([0, 1, 2], [0, k, 2 * k])
+                return f
+            return draw
+        out = {{}}
+        for w in (1, 2):
+            figs = FigureWriter(Path({str(tmp_path)!r}) / str(w), workers=w)
+            for k in range(4):
+                figs.save(f"f{{k}}.png", fig(k, fail_in_child=(k == 3)))
+            figs.finish()
+            out[w] = {{n: p.read_bytes().hex() for n, p in figs.written.items()}}
+        print(json.dumps({{"same": out[1] == out[2], "names": sorted(out[2])}}))
+        """
+    )
+    assert got == {"same": True, "names": ["f0.png", "f1.png", "f2.png", "f3.png"]}

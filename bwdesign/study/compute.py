@@ -142,6 +142,19 @@ class _Run:
             self.done[part] = value if got else _COMPUTE[part](self)
         return self.done[part]
 
+    def settle_before(self, failed: str, asked: frozenset[str]) -> None:
+        """Compute the asked :data:`BESIDE` parts that :data:`PARTS` puts before ``failed``.
+
+        With a second process at work the parts are computed in another order; a part
+        that fails then raises only after those, so the error is the one computing the
+        parts in :data:`PARTS`' order raises first.
+        """
+        if self.beside is None:
+            return
+        for p in BESIDE:
+            if p in asked and PARTS.index(p) < PARTS.index(failed):
+                self.compute(p)
+
     def start_beside(self, asked: frozenset[str]) -> None:
         """Fork the second process for the asked :data:`BESIDE` parts not computed yet."""
         parts = [p for p in BESIDE if p in asked and p not in self.done]
@@ -541,7 +554,11 @@ def study(
     try:
         for part in _order(r.beside is not None):
             if part in asked:
-                r.compute(part)
+                try:
+                    r.compute(part)
+                except Exception:
+                    r.settle_before(part, asked)  # the error the order of PARTS meets first
+                    raise
     finally:
         if r.beside is not None:
             r.beside.close()
