@@ -168,6 +168,9 @@ class _Run:
 
             return task
 
+        if "robust" in asked:  # cvxpy, which both processes use, loaded once before the fork
+            from ..certify import lmi  # noqa: F401
+
         self.beside = background.start([(p, quietly(p)) for p in parts])
         if self.beside is not None:
             for p in parts:
