@@ -144,7 +144,9 @@ def _child(tasks: Sequence[tuple[str, Callable[[], Any]]], fd: int) -> None:
             for key, task in tasks:
                 buf = io.BytesIO()
                 pickle.dump((key, task()), buf, protocol=pickle.HIGHEST_PROTOCOL)
-                out.write(buf.getvalue())
+                data = memoryview(buf.getvalue())
+                while data:  # a raw write to a pipe may take only part of it
+                    data = data[out.write(data) :]
     except BaseException:  # noqa: BLE001 - any failure: the parent computes it itself
         code = 1
     finally:
