@@ -27,8 +27,8 @@ def _run(code: str) -> dict:
         text=True,
         timeout=120,
         cwd=ROOT,
-        check=True,
     )
+    assert out.returncode == 0, out.stderr
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
