@@ -13,7 +13,9 @@ the libraries once (the "warm" start of issue 28: not the first run after instal
 
 Each row gives wall time, CPU time and peak RSS of the process (``wait4``; the reports
 run before this process imports anything heavy, since a child's peak counts the process
-it was forked from), the target (5 s; 15 s
+it was forked from). With two cores the report forks a child for part of its study and
+another for half its figures (:mod:`bwdesign.study.background`): the CPU time is both
+processes' together, the RSS the larger of the two. Then the target (5 s; 15 s
 for a stage with ``[sweep]`` or a determined ``[uncertainty]`` box, whose Monte Carlo
 and robust sections the report adds) and the ratios to it. The reference is one
 ``certify`` call of the paper's gains on ``paper_experiment`` (every tier, with

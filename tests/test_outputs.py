@@ -45,7 +45,15 @@ SIM = [
 
 
 def _fake_build(
-    config, out, *, allow_unbounded=False, quiet=False, date=None, out_dir=None, cache=None
+    config,
+    out,
+    *,
+    allow_unbounded=False,
+    quiet=False,
+    date=None,
+    out_dir=None,
+    cache=None,
+    workers=1,
 ):
     """Stand-in for the report's study and rendering: a figure, a document, a verdict."""
     figs = out / "figures"

@@ -56,7 +56,7 @@ def computed(tmp_path_factory):
 
 
 def test_a_report_from_the_cache_is_the_computed_one_byte_for_byte(
-    computed, tmp_path, monkeypatch, capsys
+    computed, paper_report, tmp_path, monkeypatch, capsys
 ):
     cache, first = computed
     kinds = sorted(p.suffix for p in cache.store.entries())
@@ -74,8 +74,23 @@ def test_a_report_from_the_cache_is_the_computed_one_byte_for_byte(
     assert _tree(tmp_path / "again") == first
     assert set(first) >= set(REPORT_FILES) and any(k.startswith("figures/") for k in first)
     assert "[report] study read from the cache" in capsys.readouterr().err
-    # without the cache: the same report, computed (the figures are drawn again)
+    # without the cache: the same report, computed (conftest's paper_report: the same
+    # stage and date, computed once per test run by write_report without a cache)
     monkeypatch.undo()
+    assert _tree(paper_report.out_dir) == first
+    # write_report without a cache keeps nothing, and draws the figures again: the same
+    # bytes (the study handed to it is the one just read back, so it is not computed a
+    # third time)
+    import bwdesign.report.certified as certified
+
+    kept = study(load_config(CONFIG), cache=cache)
+    assert kept.cached == kept.parts  # read back, nothing computed
+
+    def read_back(config, **kw):
+        assert kw["cache"] is None
+        return kept
+
+    monkeypatch.setattr(certified, "study", read_back)
     monkeypatch.setenv("BWDESIGN_CACHE_DIR", str(tmp_path / "unused"))
     write_report(load_config(CONFIG), tmp_path / "fresh", quiet=True, date=DATE)
     assert _tree(tmp_path / "fresh") == first

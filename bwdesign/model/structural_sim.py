@@ -190,7 +190,7 @@ def _rk4_nu1(
         a4 = (u1 - c * v4 - k * y4 - zf(y4)) * inv_m
         yn = y + hh / 6.0 * (v + 2.0 * v2 + 2.0 * v3 + v4)
         vn = v + hh / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4)
-        return yn, vn, a1, (u1 - c * vn - k * yn - zf(yn)) * inv_m
+        return yn, vn, a1  # the acceleration at the end only where an event needs it
 
     def u_at(t: float) -> float:
         on_grid = t / half
@@ -208,17 +208,21 @@ def _rk4_nu1(
             hh = t_end - t
             um = fine[2 * j + 1] if t == j * h else u_at(t + 0.5 * hh)
             u1 = fine[2 * j + 2]
-            yn, vn, a_s, a_e = step(y, v, hh, ua, um, u1)
+            yn, vn, a_s = step(y, v, hh, ua, um, u1)
             rev = vn * sigma < 0.0
             cross = after is not None and sigma * (yn - yc) > 0.0
             if not (rev or cross):
                 y, v = yn, vn
                 break
-            th_rev = _hermite_root(v, a_s * hh, vn, a_e * hh) if rev else 2.0
+            if rev:
+                a_e = (u1 - c * vn - k * yn - zf(yn)) * inv_m
+                th_rev = _hermite_root(v, a_s * hh, vn, a_e * hh)
+            else:
+                th_rev = 2.0
             th_cr = _hermite_root(y - yc, v * hh, yn - yc, vn * hh) if cross else 2.0
             th = min(th_rev, th_cr) * hh
             ue = u_at(t + th)
-            y, v, _, _ = step(y, v, th, ua, u_at(t + 0.5 * th), ue)
+            y, v, _ = step(y, v, th, ua, u_at(t + 0.5 * th), ue)
             t, ua = t + th, ue
             if th_rev < th_cr:
                 sigma = -sigma
@@ -248,7 +252,13 @@ def _hermite_root(v0: float, d0: float, v1: float, d1: float) -> float:
     flo = val(lo)
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        fm = val(mid)
+        s2, s3 = mid**2, mid**3  # val(mid) inlined (the same operations, without the call)
+        fm = (
+            (2 * s3 - 3 * s2 + 1) * v0
+            + (s3 - 2 * s2 + mid) * d0
+            + (-2 * s3 + 3 * s2) * v1
+            + (s3 - s2) * d1
+        )
         if (fm < 0.0) == (flo < 0.0):
             lo, flo = mid, fm
         else:

@@ -417,6 +417,7 @@ def render(
     _firmware_section(doc, study)
     _reproducibility_section(doc, study, date, out_dir)
     doc.insert(top, summary_block(study))
+    figs.finish()
     return doc
 
 
@@ -454,6 +455,7 @@ def build_report(
     date: str | None = None,
     out_dir: str | Path | None = None,
     cache: StudyCache | None = None,
+    workers: int = 1,
 ) -> tuple[Document, Study]:
     """Compute the study of ``config`` and render it, figures into ``out / "figures"``.
 
@@ -461,11 +463,18 @@ def build_report(
     staging folder inside it), for the reproducibility command's ``--out``.
     Progress lines (``[report] ...``) go to stderr unless ``quiet``. ``cache``: read
     the study and its figures from the study cache when kept there, and keep them
-    (:mod:`bwdesign.study.cache`, :mod:`bwdesign.report.figures`).
+    (:mod:`bwdesign.study.cache`, :mod:`bwdesign.report.figures`). ``workers``: 2 or
+    more computes the study and draws the figures on two processes (the same report).
     """
-    s = study(config, allow_unbounded=allow_unbounded, progress=_progress(quiet), cache=cache)
+    s = study(
+        config,
+        allow_unbounded=allow_unbounded,
+        progress=_progress(quiet),
+        cache=cache,
+        workers=workers,
+    )
     kept = kept_figures(cache, s.cache_key)
-    figs = FigureWriter(Path(out) / "figures", kept)
+    figs = FigureWriter(Path(out) / "figures", kept, workers=workers)
     doc = render(s, figs, date=date, out_dir=out_dir)
     if set(figs.written) - set(kept or {}):
         keep_figures(cache, s.cache_key, figs)
@@ -481,6 +490,7 @@ def write_report(
     date: str | None = None,
     force: bool = False,
     cache: StudyCache | None = None,
+    workers: int = 1,
 ) -> ReportOutcome:
     """Write the report for ``config`` into ``out_dir`` through the safe output layer.
 
@@ -506,6 +516,9 @@ def write_report(
     cache : StudyCache, optional
         Read the study and its figures from the study cache when this very study
         was kept there, and keep them (never in ``out_dir``); default: no cache.
+    workers : int
+        2 or more: a second process computes part of the study and draws half the
+        figures (Linux; :mod:`bwdesign.study.background`); the report is the same.
 
     Returns
     -------
@@ -531,6 +544,7 @@ def write_report(
             date=date,
             out_dir=out_dir,
             cache=cache,
+            workers=workers,
         )
         stage.write_text("certificate.json", dump_json(s.to_dict()) + "\n")
         stage.write_text("report.md", doc.to_markdown())

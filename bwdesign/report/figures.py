@@ -6,6 +6,10 @@ from the study cache (:mod:`bwdesign.study.cache`) also reads the figures drawn 
 report written from the cache is byte for byte the one computed without it, and
 matplotlib is not even imported. Figures are drawn (by :mod:`bwdesign.plotting`) only
 when they were not kept.
+
+A writer made with ``workers=2`` draws its figures at :meth:`FigureWriter.finish`, half of
+them in a second process forked for it (:mod:`bwdesign.study.background`): the same
+figures, drawn on two cores. A figure the second process did not deliver is drawn here.
 """
 
 from __future__ import annotations
@@ -14,6 +18,8 @@ import pickle
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
+
+from ..study import background
 
 __all__ = ["FigureWriter", "as_writer", "kept_figures", "keep_figures"]
 
@@ -30,13 +36,20 @@ class FigureWriter:
         Created when missing.
     kept : mapping of str to bytes, optional
         Figures already drawn for this study, by file name: written as they are.
+    workers : int
+        2 or more: figures are drawn at :meth:`finish`, every second one by a second
+        process (where one can be forked); 1: each is drawn when saved.
     """
 
-    def __init__(self, folder: str | Path, kept: Mapping[str, bytes] | None = None) -> None:
+    def __init__(
+        self, folder: str | Path, kept: Mapping[str, bytes] | None = None, *, workers: int = 1
+    ) -> None:
         self.folder = Path(folder)
         self.folder.mkdir(parents=True, exist_ok=True)
         self.kept = dict(kept or {})
         self.written: dict[str, Path] = {}
+        self.workers = workers
+        self._pending: list[tuple[str, Callable[[], Any]]] = []
 
     @property
     def name(self) -> str:
@@ -49,15 +62,47 @@ class FigureWriter:
         data = self.kept.get(filename)
         if isinstance(data, bytes):
             path.write_bytes(data)
+        elif self.workers >= 2:
+            self._pending.append((filename, draw))
         else:
-            from ..plotting.figures import save_figure
-
-            save_figure(draw(), path)
+            _draw(draw, path)
         self.written[filename] = path
+
+    def finish(self) -> None:
+        """Draw the figures saved but not drawn yet (``workers >= 2``): two processes at it."""
+        pending, self._pending = self._pending, []
+        if not pending:
+            return
+        from ..plotting import figures  # noqa: F401 - imported once, before the fork
+
+        def task(filename: str, draw: Callable[[], Any]) -> Callable[[], str]:
+            def run() -> str:
+                _draw(draw, self.folder / filename)
+                return filename
+
+            return run
+
+        theirs = pending[1::2]
+        other = background.start([(f, task(f, d)) for f, d in theirs]) if len(pending) > 1 else None
+        try:
+            for filename, draw in pending if other is None else pending[0::2]:
+                _draw(draw, self.folder / filename)
+            for filename, draw in theirs if other is not None else ():
+                if not other.result(filename)[0]:
+                    _draw(draw, self.folder / filename)
+        finally:
+            if other is not None:
+                other.close()
 
     def contents(self) -> dict[str, bytes]:
         """The bytes of every figure written, by file name."""
         return {name: path.read_bytes() for name, path in self.written.items()}
+
+
+def _draw(draw: Callable[[], Any], path: Path) -> None:
+    from ..plotting.figures import save_figure
+
+    save_figure(draw(), path)
 
 
 def as_writer(figs: FigureWriter | str | Path) -> FigureWriter:

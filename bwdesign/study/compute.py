@@ -24,6 +24,7 @@ from ..model.config import StageConfig
 from ..model.params import require_bounded
 from ..model.summary import plant_summary
 from ..observers.gains import check_gains, discrete_gains
+from . import background
 from .baselines import baseline_comparison, configured_baseline
 from .cache import StudyCache
 from .result import (
@@ -102,6 +103,15 @@ USES_GAINS = frozenset(
 ANY_PLANT = frozenset(("plant", "tuning", "loop", "versions"))
 
 _CERTIFYING = "certifying the configured gains and synthesising a certified set"
+_TIERS = "synthesis per tier (the largest envelope synthesised gains reach)"
+
+#: Parts a second process computes beside the others (``study(workers=2)``): the
+#: certificates and the per-tier synthesis read the envelope alone, and take about as
+#: long as the tracking runs, the loop analyses, the robust section and the baselines.
+BESIDE = ("configured", "synthesis", "tier_synthesis")
+#: Parts that read :data:`BESIDE`'s: computed after the others, when the second process
+#: has had the time to send them.
+_AFTER_BESIDE = ("verdict", "error_dynamics", "firmware")
 
 
 class _Run:
@@ -121,12 +131,50 @@ class _Run:
         self.progress = progress
         self.done: dict[str, Any] = {}
         self._said: set[str] = set()
+        self.beside: background.Background | None = None
 
     def compute(self, part: str) -> Any:
-        """The part ``part``, computed now unless it was before."""
+        """The part ``part``: computed before, sent by the second process, or computed now."""
         if part not in self.done:
-            self.done[part] = _COMPUTE[part](self)
+            got, value = False, None
+            if self.beside is not None and part in self.beside.keys:
+                got, value = self.beside.result(part)
+            self.done[part] = value if got else _COMPUTE[part](self)
         return self.done[part]
+
+    def settle_before(self, failed: str, asked: frozenset[str]) -> None:
+        """Compute the asked :data:`BESIDE` parts that :data:`PARTS` puts before ``failed``.
+
+        With a second process at work the parts are computed in another order; a part
+        that fails then raises only after those, so the error is the one computing the
+        parts in :data:`PARTS`' order raises first.
+        """
+        if self.beside is None:
+            return
+        for p in BESIDE:
+            if p in asked and PARTS.index(p) < PARTS.index(failed):
+                self.compute(p)
+
+    def start_beside(self, asked: frozenset[str]) -> None:
+        """Fork the second process for the asked :data:`BESIDE` parts not computed yet."""
+        parts = [p for p in BESIDE if p in asked and p not in self.done]
+        if not parts:
+            return
+
+        def quietly(part: str) -> Callable[[], Any]:
+            def task() -> Any:
+                self.progress = None  # in the child: this process says what it does
+                return self.compute(part)
+
+            return task
+
+        if "robust" in asked:  # cvxpy, which both processes use, loaded once before the fork
+            from ..certify import lmi  # noqa: F401
+
+        self.beside = background.start([(p, quietly(p)) for p in parts])
+        if self.beside is not None:
+            for p in parts:
+                self.say(_TIERS if p == "tier_synthesis" else _CERTIFYING)
 
     __getitem__ = compute
 
@@ -243,7 +291,7 @@ def _verdict(r: _Run) -> Any:
 
 
 def _tier_synthesis(r: _Run) -> TierSynthesisStudy:
-    r.say("synthesis per tier (the largest envelope synthesised gains reach)")
+    r.say(_TIERS)
     decay, pole_radius = synthesis_request(r.config)
     rows = synthesize_per_tier(
         r.params,
@@ -429,6 +477,15 @@ def _preflight(r: _Run, asked: frozenset[str]) -> None:
         check_stage_sweep(config)
 
 
+def _order(beside: bool) -> tuple[str, ...]:
+    """The order to compute the parts: :data:`PARTS`', or with a second process at work
+    (``beside``) the parts that read its parts after the others."""
+    if not beside:
+        return PARTS
+    first = tuple(p for p in PARTS if p not in BESIDE and p not in _AFTER_BESIDE)
+    return first + _AFTER_BESIDE + BESIDE
+
+
 def study(
     config: StageConfig,
     *,
@@ -437,6 +494,7 @@ def study(
     progress: Callable[[str], None] | None = None,
     settings: StudySettings | None = None,
     cache: StudyCache | None = None,
+    workers: int = 1,
 ) -> Study:
     """Compute the study of a stage: everything the certified-gains report shows.
 
@@ -457,6 +515,11 @@ def study(
         Read the parts kept for this very study (same stage file, settings, code and
         libraries: :mod:`bwdesign.study.cache`) instead of computing them, and keep
         the ones computed. Default: no cache.
+    workers : int
+        2 or more: a second process (forked, :mod:`bwdesign.study.background`)
+        computes the certificates and the per-tier synthesis (:data:`BESIDE`) while
+        this one computes the rest; the study is the same. Where no process can be
+        forked safely (not Linux, or other threads running) this process computes all.
 
     Returns
     -------
@@ -477,6 +540,8 @@ def study(
         raise InputError(f"settings must be a StudySettings, got {type(settings).__name__}")
     if cache is not None and not isinstance(cache, StudyCache):
         raise InputError(f"cache must be a StudyCache or None, got {type(cache).__name__}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise InputError(f"workers must be an integer >= 1, got {workers!r}")
     asked = _asked(parts)
     r = _Run(config, bool(allow_unbounded), settings, progress)
     key, kept = None, {}
@@ -487,9 +552,19 @@ def study(
     _preflight(r, asked)
     if kept and asked <= set(kept):
         r.say(f"study read from the cache ({cache.store.root}; --no-cache computes it)")
-    for part in PARTS:
-        if part in asked:
-            r.compute(part)
+    if workers >= 2:
+        r.start_beside(asked)
+    try:
+        for part in _order(r.beside is not None):
+            if part in asked:
+                try:
+                    r.compute(part)
+                except Exception:
+                    r.settle_before(part, asked)  # the error the order of PARTS meets first
+                    raise
+    finally:
+        if r.beside is not None:
+            r.beside.close()
     if key is not None and set(r.done) - set(kept):
         cache.save(key, r.done)
     return Study(

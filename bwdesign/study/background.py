@@ -1,0 +1,157 @@
+"""Work done beside the main process: a forked child computes a list of tasks meanwhile.
+
+The report's slow parts that do not depend on each other (the certificates and the
+per-tier synthesis beside the tracking runs and the loop analyses; half the figures
+beside the other half) run on a second core: :class:`Background` forks a child that
+runs its tasks in order and sends each result back (pickled) as soon as it has it,
+while this process goes on with its own work and asks for a result when it needs it.
+
+The child is a copy of this process at the fork, so it computes exactly what this
+process would: a result it sends is the very value computed here. Anything that goes
+wrong in the child (an exception, a result that does not pickle, the child killed)
+only means the result is not delivered; :meth:`Background.result` then answers
+``(False, None)`` and the caller computes the task itself, so errors are raised here,
+as without the child. The child ignores Ctrl-C (it is killed by :meth:`close`, which
+the caller runs in a ``finally``) and never runs this process's exit handlers.
+
+Only where :func:`os.fork` exists and is safe enough (Linux); elsewhere
+:func:`start` returns ``None`` and the caller works alone.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import pickle
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from typing import Any
+
+__all__ = ["Background", "start", "available"]
+
+
+def available() -> bool:
+    """True where a background child can be forked: Linux, and no other Python thread runs.
+
+    A fork copies only the thread that calls it; a lock another thread held at that
+    moment would stay locked in the child, so a process running other threads (a test
+    runner's, a GUI's) works alone.
+    """
+    return (
+        sys.platform.startswith("linux")
+        and hasattr(os, "fork")
+        and threading.current_thread() is threading.main_thread()
+        and threading.active_count() == 1
+    )
+
+
+def start(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> Background | None:
+    """A :class:`Background` running ``tasks``, or ``None`` (no task, or no fork here)."""
+    if not tasks or not available():
+        return None
+    try:
+        return Background(tasks)
+    except OSError:  # no process or pipe to be had: the caller works alone
+        return None
+
+
+class Background:
+    """A forked child running ``tasks`` (``(key, function)`` pairs) in order.
+
+    Parameters
+    ----------
+    tasks : sequence of (str, callable)
+        Each function is called without arguments in the child; its value is sent back.
+        The child stops at the first task that raises or whose value does not pickle.
+    """
+
+    def __init__(self, tasks: Sequence[tuple[str, Callable[[], Any]]]) -> None:
+        self.keys = tuple(k for k, _ in tasks)
+        self._results: dict[str, Any] = {}
+        self._done = threading.Condition()
+        self._finished = False
+        read, write = os.pipe()
+        for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
+            try:
+                if stream is not None:
+                    stream.flush()
+            except (OSError, ValueError):  # closed or broken: nothing to write twice either
+                pass
+        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            pid = os.fork()
+        except OSError:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+            os.close(read)
+            os.close(write)
+            raise
+        if pid == 0:  # the child (SIGINT stays blocked): never returns
+            os.close(read)
+            _child(tasks, write)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        self.pid = pid
+        os.close(write)
+        self._reader = threading.Thread(target=self._read, args=(read,), daemon=True)
+        self._reader.start()
+
+    def _read(self, fd: int) -> None:
+        with open(fd, "rb") as f:
+            while True:
+                try:
+                    key, value = pickle.load(f)
+                except Exception:  # end of the pipe (the child is done or gone)
+                    break
+                with self._done:
+                    self._results[key] = value
+                    self._done.notify_all()
+        with self._done:
+            self._finished = True
+            self._done.notify_all()
+
+    def result(self, key: str) -> tuple[bool, Any]:
+        """``(True, value)`` once the child sent ``key``; ``(False, None)`` if it never will."""
+        with self._done:
+            while key not in self._results and not self._finished:
+                self._done.wait()
+            if key in self._results:
+                return True, self._results.pop(key)
+        return False, None
+
+    def close(self) -> None:
+        """Stop the child (if still running) and reap it."""
+        if self.pid:
+            try:
+                pid, _ = os.waitpid(self.pid, os.WNOHANG)
+                if pid == 0:
+                    os.kill(self.pid, signal.SIGKILL)
+                    os.waitpid(self.pid, 0)
+            except ChildProcessError:
+                pass
+            self.pid = 0
+        self._reader.join()
+
+    def __enter__(self) -> Background:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _child(tasks: Sequence[tuple[str, Callable[[], Any]]], fd: int) -> None:
+    """Run ``tasks``, writing ``(key, value)`` pickles to ``fd``; exit without cleanup."""
+    code = 0
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        with open(fd, "wb", buffering=0) as out:
+            for key, task in tasks:
+                buf = io.BytesIO()
+                pickle.dump((key, task()), buf, protocol=pickle.HIGHEST_PROTOCOL)
+                data = memoryview(buf.getvalue())
+                while data:  # a raw write to a pipe may take only part of it
+                    data = data[out.write(data) :]
+    except BaseException:  # noqa: BLE001 - any failure: the parent computes it itself
+        code = 1
+    finally:
+        os._exit(code)

@@ -1,0 +1,169 @@
+"""The second process (bwdesign.study.background): results sent back, failures computed here.
+
+Run in a fresh interpreter: a test runner's own threads make :func:`available` say no
+(a fork copies only the calling thread), as it should.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from bwdesign.errors import InputError
+from bwdesign.study import background
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(code: str) -> dict:
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_background_sends_results_and_gives_up_on_failures():
+    got = _run(
+        """
+        import json, os
+        from bwdesign.study import background
+        assert background.available()
+        def boom():
+            raise ValueError("no")
+        bg = background.start(
+            [("a", lambda: 2 + 2), ("pid", os.getpid), ("bad", boom), ("after", lambda: 1)]
+        )
+        with bg:
+            out = {k: list(bg.result(k)) for k in ("a", "pid", "bad", "after", "unknown")}
+        unpicklable = background.start([("f", lambda: (lambda: 0))])
+        with unpicklable:
+            out["f"] = unpicklable.result("f")[0]
+        out["me"] = os.getpid()
+        out["none"] = background.start([]) is None
+        print(json.dumps(out))
+        """
+    )
+    assert got["a"] == [True, 4]
+    assert got["pid"][0] and got["pid"][1] != got["me"]  # computed in the child
+    assert got["bad"] == [False, None]  # the caller computes it (and raises) itself
+    assert got["after"] == [False, None]  # the child stops at the first failure
+    assert got["unknown"] == [False, None]
+    assert got["f"] is False
+    assert got["none"]
+
+
+def test_background_not_available_with_other_threads():
+    # this test process runs pytest's threads (or may): available() must not fork then
+    import threading
+
+    ev = threading.Event()
+    t = threading.Thread(target=ev.wait)
+    t.start()
+    try:
+        assert not background.available()
+        assert background.start([("a", lambda: 1)]) is None
+    finally:
+        ev.set()
+        t.join()
+
+
+def test_study_with_two_workers_is_the_same_study():
+    got = _run(
+        """
+        import json, os
+        import bwdesign.study.compute as C
+        from bwdesign.model.config import load_config
+        me, computed = os.getpid(), []
+        for part in C.BESIDE:
+            f = C._COMPUTE[part]
+            C._COMPUTE[part] = lambda r, f=f, part=part: (computed.append(part), f(r))[1]
+        cfg = load_config("configs/paper_simulation_corrected.toml")
+        from bwdesign.study.result import CERTIFICATE_PARTS
+        parts = CERTIFICATE_PARTS
+        one = C.study(cfg, parts=parts)
+        here = list(computed)
+        computed.clear()
+        two = C.study(cfg, parts=parts, workers=2)
+        same = one.to_dict() == two.to_dict() and one.verdict == two.verdict
+        print(json.dumps({"same": same, "one": here, "two": computed}))
+        """
+    )
+    assert got["same"]
+    assert got["one"] == ["configured", "synthesis"]
+    assert got["two"] == []  # both computed by the second process
+
+
+def test_workers_checked():
+    from bwdesign.model.config import load_config
+    from bwdesign.study import study
+
+    cfg = load_config(ROOT / "configs" / "paper_simulation_corrected.toml")
+    for bad in (0, 1.5, True, "2"):
+        with pytest.raises(InputError, match="workers"):
+            study(cfg, parts=("plant",), workers=bad)
+
+
+def test_the_error_is_the_one_the_order_of_parts_meets_first():
+    """With the second process, a failing part raises only after the BESIDE parts that
+    come before it in PARTS: the same error as computing the parts in order."""
+    got = _run(
+        """
+        import json
+        import bwdesign.study.compute as C
+        from bwdesign.model.config import load_config
+        def fail(name):
+            def f(r):
+                raise ValueError(name)
+            return f
+        C._COMPUTE["configured"] = fail("configured")
+        C._COMPUTE["tuning"] = fail("tuning")
+        cfg = load_config("configs/paper_simulation_corrected.toml")
+        out = {}
+        for w in (1, 2):
+            try:
+                C.study(cfg, parts=("configured", "tuning"), workers=w)
+            except ValueError as e:
+                out[w] = str(e)
+        print(json.dumps(out))
+        """
+    )
+    assert got == {"1": "configured", "2": "configured"}
+
+
+def test_figures_drawn_on_two_processes_are_the_same_and_failures_drawn_here(tmp_path):
+    got = _run(
+        f"""
+        import json, os
+        from pathlib import Path
+        from matplotlib.figure import Figure
+        from bwdesign.report.figures import FigureWriter
+        me = os.getpid()
+        def fig(k, fail_in_child=False):
+            def draw():
+                if fail_in_child and os.getpid() != me:
+                    raise RuntimeError("only in the child")
+                f = Figure(figsize=(2, 2))
+                f.subplots().plot([0, 1, 2], [0, k, 2 * k])
+                return f
+            return draw
+        out = {{}}
+        for w in (1, 2):
+            figs = FigureWriter(Path({str(tmp_path)!r}) / str(w), workers=w)
+            for k in range(4):
+                figs.save(f"f{{k}}.png", fig(k, fail_in_child=(k == 3)))
+            figs.finish()
+            out[w] = {{n: p.read_bytes().hex() for n, p in figs.written.items()}}
+        print(json.dumps({{"same": out[1] == out[2], "names": sorted(out[2])}}))
+        """
+    )
+    assert got == {"same": True, "names": ["f0.png", "f1.png", "f2.png", "f3.png"]}
