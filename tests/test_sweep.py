@@ -692,3 +692,15 @@ def test_corners_with_noise_at_the_bound_move_the_input_faster(tune):
     noisy = simulate_corners(loop, BOX, ref, noise_max=0.2)
     assert noisy.settings["noise_kind"] == "bounded"
     assert np.max(noisy.input_rate_max) > 1.2 * np.max(quiet.input_rate_max)
+
+
+def test_noise_free_corners_are_not_labelled_bounded(tune):
+    from bwdesign.sim.corners import simulate_corners
+
+    ctl = DiscreteTrackingController(
+        P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
+    )
+    res = simulate_corners(
+        _loop(ctl, "phdo", tune.gains), BOX, Sine(amplitude=60, offset=80, frequency=2)
+    )
+    assert "noise_kind" not in res.settings

@@ -85,5 +85,5 @@ def simulate_plants(
         input_disturbance=dist,
         noise_std=noise_max,
         seeds=np.arange(len(corners)),
-        noise_kind="bounded",
+        noise_kind="bounded" if noise_max > 0 else "gaussian",  # none: nothing to label
     )
