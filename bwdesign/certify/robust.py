@@ -659,6 +659,8 @@ def _conclude(
             "input_step_bound": step,
             "bound_method": method,
             "rounding_floor": floor,
+            # the LMI blocks' margin (>= margin I) of the kept solution (.robust_ellipsoid.EPS)
+            "lmi_margin": ell.margin,
             # the envelope shown by the certificate itself (a fixed point), or assumed
             "rate_proved": bool(holds and step is not None and step <= udot_max * dt),
             "rate_margin": (udot_max * dt / step) if holds and step else None,

@@ -52,6 +52,8 @@ class Ellipsoids:
     #: the plant (index into the data) of each block, and each plant's label
     owner: list[int] = field(default_factory=list)
     labels: list[str] = field(default_factory=list)
+    #: the LMI margin of the solution :meth:`firm` kept
+    margin: float = EPS[0]
 
     @classmethod
     def build(
@@ -130,11 +132,13 @@ class Ellipsoids:
     def firm(self, sol: Any, av: float, c: np.ndarray, st: Any, data: list[dict]) -> Any:
         """``sol`` if it passes the outside check, else the first solve at the same
         contraction with a larger margin (:data:`EPS`) that does; ``sol`` if none does."""
+        self.margin = EPS[0]
         if sol is None or not sol.ok or all(m.passed for m in self.check(sol, av, st, data)[0]):
             return sol
         for eps in EPS[1:]:
             s2 = self.attempt(av, c, eps)
             if s2.ok and all(m.passed for m in self.check(s2, av, st, data)[0]):
+                self.margin = eps
                 return s2
         return sol
 
