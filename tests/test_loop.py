@@ -154,6 +154,28 @@ def test_phase_margin_cross_check(experiment):
     assert a.delay_margin == pytest.approx(math.radians(a.phase_margin) / a.crossover)
 
 
+@pytest.mark.parametrize("delay", [False, True])
+@pytest.mark.parametrize("lam", [5.0, 240.0, 900.0, 2400.0])
+def test_frd_phase_margins_are_python_controls_to_the_bit(experiment, lam, delay):
+    """The analysis' sampled phase margins (frd_phase_margins, without python-control's
+    gain and stability margins) equal control.stability_margins(method="frd")'s."""
+    import warnings
+
+    import control
+
+    from bwdesign.control.analysis import frd_phase_margins
+
+    g = tuple(observer_gains(experiment, [-1500.0] * 3))
+    lp = lin(experiment, lam, lam, g, dt=DT, form="discrete", integral_rate=lam / 2, delay=delay)
+    sys = analyze_loop(lp).systems.loop
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        _, pms, _, _, wgc, _ = control.stability_margins(sys, returnall=True, method="frd")
+    pm, wc = frd_phase_margins(sys)
+    assert pm.size >= 1
+    assert np.array_equal(pm, np.atleast_1d(pms)) and np.array_equal(wc, np.atleast_1d(wgc))
+
+
 def test_a1_mismatch_state_feedback_vs_observer(experiment):
     """With true states an a1 error of -lambda1 lambda2/a1 removes the loop's stiffness;
     with the observer in the loop the x3 estimate absorbs it."""

@@ -275,10 +275,12 @@ def _phase_margin(loop: Any, dt: float | None) -> tuple[float, float]:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # python-control's 'poly'->'frd' note
-            # 'frd' directly for sampled loops (python-control's 'poly' step fails on them and
-            # falls back anyway); 'best' for continuous loops ('frd' needs a grid there)
-            method = "frd" if dt else "best"
-            _, pms, _, _, wgc, _ = control.stability_margins(loop, returnall=True, method=method)
+            # 'frd' for sampled loops (python-control's 'poly' step fails on them and falls
+            # back anyway); 'best' for continuous loops ('frd' needs a grid there)
+            if dt:
+                pms, wgc = frd_phase_margins(loop)
+            else:
+                _, pms, _, _, wgc, _ = control.stability_margins(loop, returnall=True)
         pms = np.atleast_1d(np.asarray(pms, dtype=float))
         wgc = np.atleast_1d(np.asarray(wgc, dtype=float))
         ok = np.isfinite(pms) & np.isfinite(wgc)
@@ -288,6 +290,43 @@ def _phase_margin(loop: Any, dt: float | None) -> tuple[float, float]:
     except Exception:  # python-control may fail on degenerate loops; margins stay nan
         pass
     return pm, wc
+
+
+def frd_phase_margins(loop: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Every phase margin (deg) and its gain crossover (rad/s) of a sampled loop, as
+    ``control.stability_margins(loop, returnall=True, method="frd")`` computes them.
+
+    The same steps on the same numbers (the loop's transfer function, python-control's
+    default frequency grid below Nyquist, its smoothed frequency response, a root of
+    ``|L| - 1`` between each pair of grid points where it changes sign), so the margins
+    are python-control's to the bit (tested), without the gain and stability margins it
+    computes beside them, which the analysis does not read (two thirds of its time).
+    Where python-control's internals are not there (another version), it is called.
+    """
+    import control
+    import scipy.optimize
+
+    try:
+        from control import frdata, freqplot, xferfcn
+
+        to_tf = xferfcn._convert_to_transfer_function
+        grid = freqplot._default_frequency_range
+    except (ImportError, AttributeError):  # pragma: no cover - another python-control
+        _, pms, _, _, wgc, _ = control.stability_margins(loop, returnall=True, method="frd")
+        return np.atleast_1d(np.asarray(pms, float)), np.atleast_1d(np.asarray(wgc, float))
+    sys = to_tf(loop)
+    omega = grid(sys)
+    frd = frdata.FRD(sys, omega[omega < np.pi / sys.dt], smooth=True)
+
+    def mod(w: Any) -> Any:
+        return np.abs(frd(1j * w)) - 1
+
+    w = frd.omega
+    idx = np.where(np.diff(np.sign(mod(w))))[0]
+    wc = np.array([scipy.optimize.brentq(mod, w[i], w[i + 1]) for i in idx])
+    with np.errstate(all="ignore"):
+        pm = np.remainder(np.angle(frd(1j * wc), deg=True), 360.0) - 180.0
+    return np.atleast_1d(pm), wc
 
 
 def _perturbed(params: BoucWenParams, parameter: str, delta: float) -> BoucWenParams:
