@@ -167,3 +167,44 @@ def test_figures_drawn_on_two_processes_are_the_same_and_failures_drawn_here(tmp
         """
     )
     assert got == {"same": True, "names": ["f0.png", "f1.png", "f2.png", "f3.png"]}
+
+
+def test_a_child_solves_lmis_after_this_process_did():
+    """Clarabel runs on one thread (bwdesign.certify.lmi.core): a child forked after this
+    process solved an LMI solves too. With its thread pool, a pool the parent had started
+    does not survive the fork and the child's solve waited for it forever."""
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent(
+                """
+                import json, os, threading
+                import cvxpy as cp, numpy as np
+                from importlib import import_module
+                from bwdesign.study import background
+                core = import_module("bwdesign.certify.lmi.core")
+
+                def solve():
+                    X = cp.Variable((24, 24), symmetric=True)
+                    C = np.diag(np.arange(1.0, 25.0))
+                    p = cp.Problem(cp.Minimize(cp.trace(C @ X)), [X >> np.eye(24)])
+                    return float(core.solve(p, {"X": X}).values["X"][0, 0])
+
+                here = solve()
+                threads = len(os.listdir(f"/proc/{os.getpid()}/task"))
+                with background.start([("x", solve)]) as bg:
+                    ok, there = bg.result("x")
+                print(json.dumps({"ok": ok, "same": there == here, "threads": threads}))
+                """
+            ),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=ROOT,
+    )
+    assert out.returncode == 0, out.stderr
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got == {"ok": True, "same": True, "threads": got["threads"]}
+    assert got["threads"] <= 3  # Clarabel started no threads of its own (before: 5)
