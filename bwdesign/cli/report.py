@@ -104,7 +104,19 @@ class ReportRequest:
 
 
 def run_report(args: argparse.Namespace) -> int:
-    """Write the report :class:`ReportRequest` ``args`` asks for; print where and the verdict."""
+    """Write the report :class:`ReportRequest` ``args`` asks for; print where and the verdict.
+
+    The compiled batch kernels (the falsifier's and the baselines' runs) run in a process
+    forked now, before numpy, scipy and the rest are imported (:mod:`bwdesign.sim.kernel_process`):
+    numba's 160 MB stay out of this process, the results are the same.
+    """
+    from ..sim import kernel_process
+
+    with kernel_process.running():
+        return _report(args)
+
+
+def _report(args: argparse.Namespace) -> int:
     from ..model.config import load_config
     from ..output.files import prepare_directory
     from ..report.certified import write_report

@@ -54,12 +54,39 @@ divergence; it never raises.
 uncertainty box.
 """
 
-from .batch import BatchResult, simulate_batch
-from .closed_loop import make_observer, simulate
-from .continuous import ContinuousSolver, simulate_continuous
-from .corners import simulate_corners
-from .metrics import Metrics, steady_state_window, tracking_metrics
-from .result import SimulationResult
+from importlib import import_module
+from typing import Any
+
+#: Each public name and the module that defines it, imported on first use: importing
+#: ``bwdesign.sim.compiled`` (the compiled kernels' process, :mod:`.kernel_process`) or
+#: ``bwdesign.sim.kernel_process`` does not load scipy and the loop machinery.
+_WHERE = {
+    "BatchResult": ".batch",
+    "simulate_batch": ".batch",
+    "make_observer": ".closed_loop",
+    "simulate": ".closed_loop",
+    "ContinuousSolver": ".continuous",
+    "simulate_continuous": ".continuous",
+    "simulate_corners": ".corners",
+    "Metrics": ".metrics",
+    "steady_state_window": ".metrics",
+    "tracking_metrics": ".metrics",
+    "SimulationResult": ".result",
+}
+
+
+def __getattr__(name: str) -> Any:
+    where = _WHERE.get(name)
+    if where is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(where, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
 
 __all__ = [
     "Metrics",

@@ -38,6 +38,7 @@ from ..errors import InputError
 from ..model.params import BoucWenParams
 from ..model.references import Reference
 from ..observers.spec import GAIN_KINDS
+from . import kernel_process
 from .closed_loop import baseline_feedforward
 from .kernel import SCALAR, LoopConstants, discrete_observer_gains, hysteresis_increment_batch
 from .run import Run, disturbance_samples, diverged, prepare, resolve_window
@@ -222,34 +223,22 @@ def _chunks(run: Run, noise: tuple, dist):
 
     ``noise`` = ``(noise_std, seeds, kind)``; scenario ``i``'s noise is
     :func:`~.run.sensor_noise` of ``noise_std[i]`` and ``seeds[i]``, as :func:`simulate`
-    draws it; ``dist`` rows are scenarios (none, or one per scenario).
+    draws it; ``dist`` rows are scenarios (none, or one per scenario). The chunk's noise
+    is given as what draws it, ``(seeds, std, bounded)`` (:func:`.compiled.noise_rows`):
+    the runner draws it where it runs (:mod:`.kernel_process`), no array is sent.
     """
-    from .compiled import scaled_normals  # here: numba is loaded by a batch only
-
     noise_std, seeds, kind = noise
     n, N = run.n, noise_std.size
     noisy = bool(np.any(noise_std > 0))
     step = max(1, _CHUNK_VALUES // max(n, 1)) if noisy or dist is not None else N
     for lo in range(0, N, step):
         hi = min(N, lo + step)
-        rows = np.empty((hi - lo, n) if noisy else (1, 1))
-        for i in range(lo, hi) if noisy else ():
-            row = rows[i - lo]
-            std = float(noise_std[i])
-            if std <= 0:
-                row[:] = 0.0
-                continue
-            # numba's Generator draws numpy's numbers (the same PCG64 and ziggurat), 1.6x
-            # faster, straight into the row: sensor_noise's std * standard_normal(n)
-            rng = np.random.default_rng(int(seeds[i]))
-            if kind == "gaussian":
-                scaled_normals(rng, row, std)
-            else:  # std * sign(standard_normal(n))
-                scaled_normals(rng, row, 1.0)
-                np.sign(row, out=row)
-                row *= std
+        drawn = None
+        if noisy:
+            std = np.ascontiguousarray(noise_std[lo:hi], dtype=float)
+            drawn = ([int(v) for v in seeds[lo:hi]], std, kind != "gaussian")
         d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(dist[:, lo:hi].T)
-        yield lo, hi, rows if noisy else np.zeros((1, 1)), d, noisy
+        yield lo, hi, drawn, d, noisy
 
 
 def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, count: int):
@@ -278,8 +267,6 @@ def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, 
 
 def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     """A baseline loop for every scenario (:func:`.compiled.baseline_batch`)."""
-    from .compiled import baseline_batch  # here: numba is loaded by a batch only
-
     loop, N = run.loop, len(run.true_params)
     dt, limit = loop.dt, loop.divergence_limit
     xd = run.reference_terms()[0]
@@ -297,7 +284,8 @@ def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     out = np.zeros((N, 20))
     for lo, hi, rows, d, noisy in _chunks(run, noise, dist):
         flags = np.array([float(bool(loop.delay)), limit, float(noisy)])
-        baseline_batch(plant[lo:hi], law, ref, flags, st, rows, d, out[lo:hi])
+        args = (plant[lo:hi], law, ref, flags, st, rows, d, out[lo:hi])
+        kernel_process.run("baseline_drawn", args, 7)
     acc = _finish(out, T, limit, dt, int(np.count_nonzero(in_win)))
     nan = np.full(N, np.nan)
     acc.update(est_sq=[nan] * 3, est_max=[nan] * 3)
@@ -307,8 +295,6 @@ def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
 def _run_batch(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     """The loop for every scenario (:func:`.compiled.observer_batch`, the step of
     :mod:`bwdesign.sim.kernel` compiled)."""
-    from .compiled import observer_batch  # here: numba is loaded by a batch only
-
     loop, N = run.loop, len(run.true_params)
     dt, limit = loop.dt, loop.divergence_limit
     ref3 = run.reference_terms()
@@ -336,5 +322,5 @@ def _run_batch(run: Run, in_win: np.ndarray, noise, dist) -> dict:
              limit, float(noisy)]
         )  # fmt: skip
         consts = (model, gains, law, lim, flags, st)
-        observer_batch(plant[lo:hi], consts, ref, rows, d, out[lo:hi])
+        kernel_process.run("observer_drawn", (plant[lo:hi], consts, ref, rows, d, out[lo:hi]), 5)
     return _finish(out, T, limit, dt, int(np.count_nonzero(in_win)))

@@ -30,7 +30,15 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["observer_batch", "baseline_batch", "hysteresis_jump", "scaled_normals"]
+__all__ = [
+    "observer_batch",
+    "baseline_batch",
+    "observer_drawn",
+    "baseline_drawn",
+    "hysteresis_jump",
+    "scaled_normals",
+    "noise_rows",
+]
 
 #: Scenarios stepped side by side in :func:`_observer_batch`.
 _LANES = 2
@@ -342,3 +350,45 @@ def scaled_normals(rng, out, scale):
     """
     for i in range(out.shape[0]):
         out[i] = scale * rng.standard_normal()
+
+
+def noise_rows(seeds, std, bounded, rows):
+    """Row ``i`` of ``rows``: ``std[i] * default_rng(seeds[i]).standard_normal(n)``
+    (:func:`bwdesign.sim.run.sensor_noise`), or ``std[i]`` times its sign (``bounded``);
+    zeros where ``std[i] <= 0``."""
+    for i in range(rows.shape[0]):
+        row = rows[i]
+        s = float(std[i])
+        if s <= 0:
+            row[:] = 0.0
+            continue
+        # numba's Generator draws numpy's numbers (the same PCG64 and ziggurat), 1.6x
+        # faster, straight into the row
+        rng = np.random.default_rng(int(seeds[i]))
+        if not bounded:
+            scaled_normals(rng, row, s)
+        else:  # std * sign(standard_normal(n))
+            scaled_normals(rng, row, 1.0)
+            np.sign(row, out=row)
+            row *= s
+
+
+def _drawn_noise(drawn, n):
+    """The ``(N, n)`` noise ``(seeds, std, bounded)`` describes (:func:`noise_rows`), or the
+    ``(1, 1)`` placeholder of a run without noise (``None``)."""
+    if drawn is None:
+        return np.zeros((1, 1))
+    seeds, std, bounded = drawn
+    rows = np.empty((len(seeds), n))
+    noise_rows(seeds, std, bounded, rows)
+    return rows
+
+
+def observer_drawn(plant, consts, ref, drawn, dist, out):
+    """:func:`observer_batch` with the noise drawn here from ``drawn`` (:func:`_drawn_noise`)."""
+    observer_batch(plant, consts, ref, _drawn_noise(drawn, ref.shape[1] - 1), dist, out)
+
+
+def baseline_drawn(plant, law, ref, flags, start, drawn, dist, out):
+    """:func:`baseline_batch` with the noise drawn here from ``drawn`` (:func:`_drawn_noise`)."""
+    baseline_batch(plant, law, ref, flags, start, _drawn_noise(drawn, ref.shape[1] - 1), dist, out)

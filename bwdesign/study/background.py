@@ -29,22 +29,15 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from ..sim import kernel_process
+
 __all__ = ["Background", "start", "available"]
 
 
 def available() -> bool:
-    """True where a background child can be forked: Linux, and no other Python thread runs.
-
-    A fork copies only the thread that calls it; a lock another thread held at that
-    moment would stay locked in the child, so a process running other threads (a test
-    runner's, a GUI's) works alone.
-    """
-    return (
-        sys.platform.startswith("linux")
-        and hasattr(os, "fork")
-        and threading.current_thread() is threading.main_thread()
-        and threading.active_count() == 1
-    )
+    """True where a background child can be forked: Linux, and no other Python thread runs
+    (:func:`bwdesign.sim.kernel_process.fork_is_safe`)."""
+    return kernel_process.fork_is_safe()
 
 
 def start(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> Background | None:
