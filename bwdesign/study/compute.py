@@ -106,9 +106,12 @@ _CERTIFYING = "certifying the configured gains and synthesising a certified set"
 _TIERS = "synthesis per tier (the largest envelope synthesised gains reach)"
 
 #: Parts a second process computes beside the others (``study(workers=2)``): the
-#: certificates and the per-tier synthesis read the envelope alone, and take about as
-#: long as the tracking runs, the loop analyses, the robust section and the baselines.
-BESIDE = ("configured", "synthesis", "tier_synthesis")
+#: certificates and the per-tier synthesis read the envelope alone, the robust section
+#: the tuning (computed there too), and together take about as long as the tracking runs,
+#: the loop analyses, the sweep and the baselines. The robust section's largest solve
+#: (Clarabel's factorisation, about 64 MB on the stack's box) is then made there, not
+#: beside this process's own data.
+BESIDE = ("configured", "synthesis", "tier_synthesis", "robust")
 #: Parts that read :data:`BESIDE`'s: computed after the others, when the second process
 #: has had the time to send them.
 _AFTER_BESIDE = ("verdict", "error_dynamics", "firmware")
@@ -174,7 +177,9 @@ class _Run:
         self.beside = background.start([(p, quietly(p)) for p in parts])
         if self.beside is not None:
             for p in parts:
-                self.say(_TIERS if p == "tier_synthesis" else _CERTIFYING)
+                says = {"tier_synthesis": _TIERS, "robust": _robust_says(self)}
+                if says.get(p, _CERTIFYING) is not None:
+                    self.say(says.get(p, _CERTIFYING))
 
     __getitem__ = compute
 
@@ -344,19 +349,28 @@ def _sweep(r: _Run) -> Any:
     return stage_sweep(r.config)
 
 
-def _robust(r: _Run) -> Any:
+def _robust_says(r: _Run) -> str | None:
+    """What computing the robust part says (None: there is nothing to certify)."""
     box = r.config.uncertainty
-    tuning = r["tuning"]
     if box is None or box.undetermined():
         if not r.params.bounded_class().bounded:  # (--allow-unbounded): nothing to certify
             return None
-        r.say("certificate of the nominal loop")
-        try:  # a stage without a box: the nominal certificate alone, where it applies
-            return robust_study(r.config, tuning, r.udot_max)
-        except InputError:
-            return None
-    r.say("robust certificate over [uncertainty] (every corner) and of the nominal loop")
-    return robust_study(r.config, tuning, r.udot_max)
+        return "certificate of the nominal loop"
+    return "robust certificate over [uncertainty] (every corner) and of the nominal loop"
+
+
+def _robust(r: _Run) -> Any:
+    says = _robust_says(r)
+    if says is None:
+        return None
+    tuning = r["tuning"]
+    r.say(says)
+    if says.startswith("robust"):
+        return robust_study(r.config, tuning, r.udot_max)
+    try:  # a stage without a box: the nominal certificate alone, where it applies
+        return robust_study(r.config, tuning, r.udot_max)
+    except InputError:
+        return None
 
 
 def _firmware(r: _Run) -> Firmware:
