@@ -11,6 +11,12 @@ their ratio:
   mid-cycle, with a 7 um offset, a 50 nm sensor drift and 16-bit quantisation:
   target <= 5 s.
 
+And the structural form (issue 30) on the hysteretic benchmark's 8192-sample training
+record: one period simulated by the compiled nu = 1 integrator beside the same period by
+its Python reference (the ratio is what numba earns there: the same floats, checked
+here), and ``identify --form structural --periodic`` on the record (no target; 12 s
+before the compiled integrator).
+
 BLAS threads: on a shared machine multi-threaded BLAS in the small SVDs can
 slow the fit; the thread settings in force are printed (run with
 ``OPENBLAS_NUM_THREADS=1`` for one core).
@@ -72,7 +78,40 @@ def main() -> int:
     print(f"python {sys.version.split()[0]}, numpy {np.__version__}; {threads}")
     ok = _line("10 000-sample multisine", rec, plant, 1.0)
     ok &= _line("50 000-sample 1 Hz sine (mid-cycle)", _slow_sine(plant, 50_000), plant, 5.0)
+    ok &= _structural()
     return 0 if ok else 1
+
+
+def _structural() -> bool:
+    """The compiled structural integrator beside its Python reference, and an identification."""
+    from bwdesign.identify.hysteretic_benchmark import benchmark_records
+    from bwdesign.identify.structural import identify_structural
+    from bwdesign.model import structural_sim as S
+    from bwdesign.model.structural import BENCHMARK
+
+    rec = benchmark_records(seed=0)["train"]
+    fine = S._fine(rec.u, 8, True)
+    total = S._steps(rec.u, 8, True)
+    args = (BENCHMARK, fine, rec.dt / 8, 8, total, (0.0, 0.0, 0.0))
+    S.rk4_compiled(*args)  # compiled (or read from numba's cache) once
+    runs = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        fast = S.rk4_compiled(*args)
+        runs.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    slow = S._rk4_nu1(BENCHMARK, fine.tolist(), *args[2:])
+    t_py = time.perf_counter() - t0
+    same = all(np.array_equal(a, b) for a, b in zip(fast, slow, strict=True))
+    t_c = statistics.median(runs)
+    print(
+        f"structural nu = 1 period (8192 samples, 8 steps each): compiled {t_c * 1e3:.1f} ms, "
+        f"Python reference {t_py * 1e3:.0f} ms, ratio {t_py / t_c:.0f}x, same floats: {same}"
+    )
+    t0 = time.perf_counter()
+    identify_structural([rec], periodic=True)
+    print(f"identify --form structural --periodic on that record: {time.perf_counter() - t0:.2f} s")
+    return same
 
 
 if __name__ == "__main__":

@@ -35,12 +35,13 @@ LAYERS = (
     ("cli",),
 )
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
-#: Third-party packages allowed in one subpackage (or module) only.
+#: Third-party packages allowed in one subpackage (or module) only (numba: in the two
+#: compiled loops, each beside the Python it repeats, where ``make bench`` shows it earns it).
 CONFINED = {
     "cvxpy": "bwdesign.certify.lmi",
     "matplotlib": "bwdesign.plotting",
     "dask": "bwdesign.sim.sweep",
-    "numba": "bwdesign.sim.compiled",
+    "numba": ("bwdesign.sim.compiled", "bwdesign.model.structural_compiled"),
 }
 #: The C templates are read only by code generation.
 TEMPLATES_HOME = "bwdesign.codegen"
@@ -154,11 +155,13 @@ def test_plotting_imports_nothing_from_bwdesign():
 
 @pytest.mark.parametrize("library", sorted(CONFINED))
 def test_heavy_libraries_are_confined(library):
-    home = CONFINED[library]
+    homes = CONFINED[library]
+    homes = (homes,) if isinstance(homes, str) else homes
     users = [m for m, t in GRAPH.items() if "!" + library in t]
     assert users, f"nothing imports {library}: is the rule stale?"
-    outside = [m for m in users if m != home and not m.startswith(home + ".")]
-    assert not outside, f"{library} imported outside {home}: {outside}"
+    outside = [m for m in users if not any(m == h or m.startswith(h + ".") for h in homes)]
+    assert not outside, f"{library} imported outside {homes}: {outside}"
+    assert all(any(m == h or m.startswith(h + ".") for m in users) for h in homes), "stale home"
 
 
 def test_no_import_cycle():

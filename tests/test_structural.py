@@ -223,6 +223,43 @@ def test_fast_path_agrees_with_the_reference(short_reference):
     assert 10.0 < e8 / e16 < 25.0
 
 
+def test_the_compiled_integrator_is_the_python_one_to_the_bit():
+    """structural_sim.rk4_compiled (numba) against _rk4_nu1 (Python): the benchmark's
+    records from rest and from a moving state, and random inputs, steps and stiffness
+    (reversals and zero crossings in most steps, or a divergence, whose message is the
+    same); every float equal."""
+    from bwdesign.errors import SolverError
+    from bwdesign.model import structural_sim as S
+
+    def both(p, fine, h, sps, total, x0):
+        out = []
+        for run in (S._rk4_nu1, S.rk4_compiled):
+            try:
+                out.append(run(p, fine.tolist() if run is S._rk4_nu1 else fine, h, sps, total, x0))
+            except SolverError as err:
+                out.append(str(err))
+        return out
+
+    rec = benchmark_records(seed=3)["train"]
+    for periodic, x0 in [(True, (0.0, 0.0, 0.0)), (False, (1e-4, -2e-3, 3.0))]:
+        fine = S._fine(rec.u[:1500], 4, periodic)
+        a, b = both(BENCHMARK, fine, rec.dt / 4, 4, S._steps(rec.u[:1500], 4, periodic), x0)
+        assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    rng = np.random.default_rng(1)
+    kinds = set()
+    for _ in range(30):
+        p = BENCHMARK.replace(k=BENCHMARK.k * 10.0 ** rng.uniform(-1, 1))
+        fine = 10.0 ** rng.uniform(0, 8) * rng.standard_normal(401)
+        a, b = both(p, fine, 10.0 ** rng.uniform(-5, -1), 1, 200, (0.0, 0.0, 0.0))
+        if isinstance(a, str):
+            assert a == b and "diverged" in a
+            kinds.add("error")
+        else:
+            assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+            kinds.add("ok")
+    assert kinds == {"ok", "error"}
+
+
 def test_error_control_meets_its_tolerance(short_reference):
     u, ref, fs = short_reference
     scale = np.max(np.abs(ref[0]))

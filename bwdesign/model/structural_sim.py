@@ -240,6 +240,25 @@ def _rk4_nu1(
     return ys, vs, zs
 
 
+def rk4_compiled(
+    p: StructuralParams, fine: np.ndarray, h: float, steps_per_sample: int, total: int, x0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_rk4_nu1` compiled (:mod:`.structural_compiled`): the same floats to the bit
+    (tested), about 20 times faster; its errors raised here, with the same messages."""
+    from .structural_compiled import rk4_nu1  # here: numba is loaded by a simulation only
+
+    pars = (p.m, p.c, p.k, p.alpha, p.beta, p.gamma, p.delta)
+    code, step, t, ys, vs, zs = rk4_nu1(pars, fine, h, steps_per_sample, total, x0)
+    if code == 1:
+        raise SolverError(
+            f"more than 8 events within one integration step at t = {t:.6g} s; raise the "
+            "upsampling factor"
+        )
+    if code == 2:
+        raise SolverError(f"the structural simulation diverged at t = {step * h:.6g} s")
+    return ys, vs, zs
+
+
 def _hermite_root(v0: float, d0: float, v1: float, d1: float) -> float:
     """The zero in (0, 1) of the cubic Hermite interpolant with ends v0, v1 and slopes d0, d1."""
 
@@ -406,7 +425,7 @@ def _rk4_run(
 ) -> StructuralRun:
     fine = _fine(u, upsample, periodic)
     total = _steps(u, upsample, periodic)
-    y, v, z = _rk4_nu1(params, fine.tolist(), dt / upsample, upsample, total, x0)
+    y, v, z = rk4_compiled(params, fine, dt / upsample, upsample, total, x0)
     n = u.size
     state = np.array([y[-1], v[-1], z[-1]])
     return StructuralRun(y[:n], v[:n], z[:n], state, upsample=upsample)
