@@ -191,6 +191,34 @@ def test_a1_mismatch_state_feedback_vs_observer(experiment):
     json.dumps(json_safe(sw.to_dict()))
 
 
+def test_digital_tuning_is_kept_by_its_exact_arguments(experiment, monkeypatch):
+    """The same arguments give the same tuning without computing it again; a copy goes
+    out (changing it changes no later answer); other arguments are computed."""
+    from bwdesign.design import tuning as T
+
+    calls = []
+    real_tune = T._tune
+
+    def counted(*args):
+        calls.append(args[1])
+        return real_tune(*args)
+
+    monkeypatch.setattr(T, "_MEMO", {})
+    monkeypatch.setattr(T, "_tune", counted)
+    a = digital_tuning(experiment, DT, integral_ratio=0.45)
+    b = digital_tuning(experiment, DT, integral_ratio=0.45)
+    assert len(calls) == 1 and a is not b
+    assert (a.lambda1, a.gains, a.reasoning, a.worst_phase_margin) == (
+        b.lambda1, b.gains, b.reasoning, b.worst_phase_margin
+    )  # fmt: skip
+    assert np.array_equal(a.nominal.poles, b.nominal.poles)
+    b.candidates.clear()  # a caller's copy: the kept one is untouched
+    c = digital_tuning(experiment, DT, integral_ratio=0.45)
+    assert len(calls) == 1 and c.candidates == a.candidates and c.candidates
+    d = digital_tuning(experiment, DT * (1 + 2**-52), integral_ratio=0.45)  # the next float
+    assert len(calls) == 2 and d.dt != a.dt
+
+
 def test_delay_lowers_phase_margin(experiment):
     g = tuple(observer_gains(experiment, [-1000.0] * 3))
     kw = dict(dt=DT, form="discrete")

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import math
+import pickle
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -382,6 +384,47 @@ def digital_tuning(
     if not isinstance(margins, MarginRequirements):
         raise InputError(f"margins must be a MarginRequirements, got {margins!r}")
     n_candidates = integer(n_candidates, "n_candidates", within=Range(1, 10_000))
+    args = (params, dt, gains, observer_radius, integral_ratio, mismatch, uncertainty, delay)
+    key = _memo_key((*args, margins, n_candidates))
+    if key is not None and key in _MEMO:
+        return copy.deepcopy(_MEMO[key])
+    tuning = _tune(*args, margins, n_candidates)
+    if key is not None:
+        while len(_MEMO) >= _MEMO_SIZE:
+            _MEMO.pop(next(iter(_MEMO)))
+        _MEMO[key] = copy.deepcopy(tuning)
+    return tuning
+
+
+#: :func:`digital_tuning`'s answers kept by their exact arguments, in this process: it is
+#: a pure function of them (the report's parts, the robust design and the checks ask for
+#: the same stage's tuning again). A copy goes out, so no caller changes another's.
+_MEMO: dict[bytes, DigitalTuning] = {}
+_MEMO_SIZE = 16
+
+
+def _memo_key(args: tuple) -> bytes | None:
+    """The arguments' exact bytes (pickled: every float to the bit), or None (unpicklable:
+    not kept)."""
+    try:
+        return pickle.dumps(args, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception:  # noqa: BLE001 - an argument that does not pickle: computed each time
+        return None
+
+
+def _tune(
+    params: BoucWenParams,
+    dt: float,
+    gains: Any,
+    observer_radius: float | None,
+    integral_ratio: float | None,
+    mismatch: float | None,
+    uncertainty: UncertaintyBox | None,
+    delay: bool,
+    margins: MarginRequirements,
+    n_candidates: int,
+) -> DigitalTuning:
+    """:func:`digital_tuning` on validated arguments."""
     observers = _observers(params, dt, gains, observer_radius)
     truths, checked = _mismatch_plants(params, mismatch, uncertainty)
     req = margins.as_dict(dt)
