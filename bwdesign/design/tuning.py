@@ -374,6 +374,8 @@ def digital_tuning(
     Returns
     -------
     DigitalTuning
+        Kept for the process by its exact arguments: asked again, a copy of the kept
+        answer comes back without computing it.
     """
     dt = check_dt(dt)
     if observer_radius is not None:
