@@ -22,7 +22,10 @@ import json
 import os
 import shutil
 import stat
+import subprocess
+import sys
 import tempfile
+import textwrap
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -243,6 +246,21 @@ def paper_report(tmp_path_factory) -> WrittenReport:
     (tests/test_claims_report.py); every one of them only reads it.
     """
     return write_report_once(tmp_path_factory, "paper_report", PAPER_CONFIG)
+
+
+def run_python(code: str, *, timeout: float = 120) -> dict:
+    """Run ``code`` (dedented) in a fresh interpreter at the repository's root: it must
+    exit 0; its last line of output, JSON, is returned. For what a test runner's own
+    threads forbid in its process (a fork) or what its imports would hide."""
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+    )
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def headless_chromium(window: str = "1280,2000"):

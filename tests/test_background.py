@@ -13,6 +13,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import run_python
 
 from bwdesign.errors import InputError
 from bwdesign.study import background
@@ -20,20 +21,8 @@ from bwdesign.study import background
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _run(code: str) -> dict:
-    out = subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(code)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        cwd=ROOT,
-    )
-    assert out.returncode == 0, out.stderr
-    return json.loads(out.stdout.strip().splitlines()[-1])
-
-
 def test_background_sends_results_and_gives_up_on_failures():
-    got = _run(
+    got = run_python(
         """
         import json, os
         from bwdesign.study import background
@@ -78,7 +67,7 @@ def test_background_not_available_with_other_threads():
 
 
 def test_study_with_two_workers_is_the_same_study():
-    got = _run(
+    got = run_python(
         """
         import json, os
         import bwdesign.study.compute as C
@@ -116,7 +105,7 @@ def test_workers_checked():
 def test_the_error_is_the_one_the_order_of_parts_meets_first():
     """With the second process, a failing part raises only after the BESIDE parts that
     come before it in PARTS: the same error as computing the parts in order."""
-    got = _run(
+    got = run_python(
         """
         import json
         import bwdesign.study.compute as C
@@ -141,7 +130,7 @@ def test_the_error_is_the_one_the_order_of_parts_meets_first():
 
 
 def test_figures_drawn_on_two_processes_are_the_same_and_failures_drawn_here(tmp_path):
-    got = _run(
+    got = run_python(
         f"""
         import json, os
         from pathlib import Path

@@ -9,14 +9,9 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
-import textwrap
-from pathlib import Path
 
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
+from conftest import run_python
 
 #: Noisy batches (Gaussian and bounded noise) of corners of the stack's box and a
 #: baseline batch, run through ``simulate_batch``; ``batches()`` returns their metrics.
@@ -46,20 +41,8 @@ def batches():
 """
 
 
-def _run(code: str) -> dict:
-    out = subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(code)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-    )
-    assert out.returncode == 0, out.stderr
-    return json.loads(out.stdout.strip().splitlines()[-1])
-
-
 def test_importing_the_kernel_process_module_loads_nothing_heavy():
-    got = _run(
+    got = run_python(
         """
         import json, sys
         from bwdesign.sim import kernel_process
@@ -73,7 +56,7 @@ def test_batches_there_equal_batches_here_a_child_is_served_and_a_kill_means_her
     """In one interpreter: the batches in the kernel process (numba never loaded here),
     the same batches from a forked child (served there too), then, the kernel process
     killed, the same batches run here (numba loaded here); all equal to the bit."""
-    got = _run(
+    got = run_python(
         BATCHES
         + """
 import signal
@@ -107,7 +90,7 @@ print(json.dumps({"there": there, "numba_there": numba_there, "child": child,
 
 
 def test_not_started_beside_other_threads_and_the_batch_runs_here():
-    got = _run(
+    got = run_python(
         BATCHES
         + """
 import threading
@@ -136,7 +119,7 @@ code = main(["report", "--config", "paper_experiment", "--out", {str(tmp_path / 
              "--quiet", "--no-cache"])
 print(json.dumps({{"code": code, "numba": "numba" in sys.modules}}))
 """
-    got = _run(code)
+    got = run_python(code)
     assert got == {"code": 0, "numba": False}
     a = json.loads((tmp_path / "a" / "certificate.json").read_text())
     assert a["baselines"] and a["robust"]  # the sections whose runs were batched
