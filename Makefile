@@ -43,12 +43,14 @@ reports: $(STAMP)
 	  $(BIN)/bwdesign report --config $$c --out reports/$$(basename $$c .toml) || exit $$?; \
 	done
 
-# the paper reproduction: observer comparison (Section 4.1) and Tables 1-2, and the
-# baselines beside the observer loops (issue 29)
+# the paper reproduction: observer comparison (Section 4.1) and Tables 1-2, the
+# baselines beside the observer loops (issue 29), and the certified robust bounds beside
+# the worst cases found on every bundled stage (issue 27)
 paper: $(STAMP)
 	$(BIN)/python analysis/observer_comparison.py --out reports/observers
 	$(BIN)/python analysis/paper_tables.py --out reports/paper
 	$(BIN)/python analysis/baselines_table.py --out reports/baselines
+	$(BIN)/python analysis/robust_bounds.py --out reports/robust_bounds
 
 lint: $(STAMP)
 	$(BIN)/ruff check bwdesign tests analysis benchmarks examples docs/conf.py docs/api_names.py
