@@ -117,3 +117,23 @@ def test_the_nominal_loop_is_certified_by_a_box_of_zero_width():
     assert "certified for the nominal plant" in rc.status
     assert found.plants == 1
     assert 0 < found.worst_maxe <= rc.tracking_bound
+
+
+def test_the_lyapunov_function_of_the_rest_bounds_is_checked_and_scipys_warning_not_shown():
+    """decreasing_lyapunov keeps scipy's P only when P > 0 and P - A'PA > 0 (computed):
+    a stable matrix gives one, an unstable one and a badly scaled one whose solve went
+    wrong give None, and scipy's ill-conditioning warning is never shown."""
+    import warnings
+
+    peak = importlib.import_module("bwdesign.certify.peak")
+    rng = np.random.default_rng(0)
+    Q, _ = np.linalg.qr(rng.normal(size=(5, 5)))
+    A0 = Q @ np.diag([0.9995, 0.99, 0.5, 0.1, -0.3]) @ Q.T
+    T = np.diag([1.0, 1e5, 1e-5, 1e3, 1e-3])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a warning shown would fail here
+        P = peak.decreasing_lyapunov(A0)
+        assert P is not None
+        assert np.allclose(A0.T @ P @ A0 - P, -np.eye(5), atol=1e-8)
+        assert peak.decreasing_lyapunov(1.01 * A0) is None  # not stable: no decrease
+        assert peak.decreasing_lyapunov(T @ A0 @ np.linalg.inv(T)) is None  # scipy warns here

@@ -34,9 +34,9 @@ import math
 from fractions import Fraction
 
 import numpy as np
-from scipy.linalg import solve_discrete_lyapunov
 
 from ..model.references import Reference
+from .peak import decreasing_lyapunov
 
 __all__ = ["response_sups", "MAX_PERIOD_SAMPLES"]
 
@@ -150,12 +150,11 @@ def _run(A, BM, sig, classes, z0, rows: _Rows | None):
 
 
 def _lyapunov(A: np.ndarray) -> np.ndarray | None:
-    try:
-        P = np.array([solve_discrete_lyapunov(a.T, np.eye(a.shape[0])) for a in A])
-    except (np.linalg.LinAlgError, ValueError):
+    """Per plant ``P`` with ``A'PA - P = -I``, each checked (:func:`.peak.decreasing_lyapunov`)."""
+    Ps = [decreasing_lyapunov(a) for a in A]
+    if any(P is None for P in Ps):
         return None
-    if not np.all(np.isfinite(P)):
-        return None
+    P = np.array(Ps)
     return 0.5 * (P + np.swapaxes(P, 1, 2))
 
 
