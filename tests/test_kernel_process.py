@@ -124,3 +124,19 @@ print(json.dumps({{"code": code, "numba": "numba" in sys.modules}}))
     a = json.loads((tmp_path / "a" / "certificate.json").read_text())
     assert a["baselines"] and a["robust"]  # the sections whose runs were batched
     assert os.path.exists(tmp_path / "a" / "report.md")
+
+
+def test_the_kernel_process_answers_only_this_users_processes():
+    """A request is a pickle (it runs code when loaded) and an abstract socket's name is
+    public: the kernel process reads the peer's user id (SO_PEERCRED) and answers only
+    this user's processes."""
+    import socket
+
+    from bwdesign.sim import kernel_process
+
+    a, b = socket.socketpair()
+    with a, b:
+        assert kernel_process._peer_uid(a) == os.getuid()
+    udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    with udp:
+        assert kernel_process._peer_uid(udp) == -1  # no peer: unknown, so never answered

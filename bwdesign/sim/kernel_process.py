@@ -31,6 +31,7 @@ import secrets
 import select
 import signal
 import socket
+import struct
 import sys
 import threading
 from collections.abc import Iterator
@@ -149,6 +150,20 @@ def _answer(f: Any) -> bool:
     return True
 
 
+def _peer_uid(conn: socket.socket) -> int:
+    """The user id of the process at the other end (``SO_PEERCRED``; -1 if unknown).
+
+    An abstract socket's name is listed in ``/proc/net/unix`` for every user to see, and
+    a request is a pickle, which runs code when loaded: only a process of this user (who
+    can run code as this user anyway) is answered.
+    """
+    try:
+        cred = conn.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i"))
+        return struct.unpack("3i", cred)[1]
+    except (OSError, AttributeError, struct.error):
+        return -1
+
+
 def _serve(listener: socket.socket, owner: int) -> None:
     """Answer requests, one at a time, on every connection, while ``owner`` lives; exit
     without cleanup."""
@@ -161,6 +176,9 @@ def _serve(listener: socket.socket, owner: int) -> None:
             for sock in ready:
                 if sock is listener:
                     conn, _ = listener.accept()
+                    if _peer_uid(conn) != os.getuid():  # another user's process: refused
+                        conn.close()
+                        continue
                     clients[conn] = conn.makefile("rwb")
                 elif not _answer(clients[sock]):
                     clients.pop(sock).close()
