@@ -349,14 +349,19 @@ def _sweep(r: _Run) -> Any:
     return stage_sweep(r.config)
 
 
+#: What computing the robust part says: over the stage's box, or the nominal loop alone.
+_ROBUST_BOX = "robust certificate over [uncertainty] (every corner) and of the nominal loop"
+_ROBUST_NOMINAL = "certificate of the nominal loop"
+
+
 def _robust_says(r: _Run) -> str | None:
     """What computing the robust part says (None: there is nothing to certify)."""
     box = r.config.uncertainty
     if box is None or box.undetermined():
         if not r.params.bounded_class().bounded:  # (--allow-unbounded): nothing to certify
             return None
-        return "certificate of the nominal loop"
-    return "robust certificate over [uncertainty] (every corner) and of the nominal loop"
+        return _ROBUST_NOMINAL
+    return _ROBUST_BOX
 
 
 def _robust(r: _Run) -> Any:
@@ -365,12 +370,12 @@ def _robust(r: _Run) -> Any:
         return None
     tuning = r["tuning"]
     r.say(says)
-    if says.startswith("robust"):
-        return robust_study(r.config, tuning, r.udot_max)
-    try:  # a stage without a box: the nominal certificate alone, where it applies
+    try:
         return robust_study(r.config, tuning, r.udot_max)
     except InputError:
-        return None
+        if says == _ROBUST_BOX:
+            raise
+        return None  # a stage without a box: the nominal certificate alone, where it applies
 
 
 def _firmware(r: _Run) -> Firmware:
