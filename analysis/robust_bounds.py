@@ -35,7 +35,7 @@ from bwdesign import ClosedLoop, UncertaintyBox, load_config
 from bwdesign.design import prove_rate
 from bwdesign.design.tuning import digital_tuning
 from bwdesign.output.files import prepare_directory
-from bwdesign.study.robust import ROBUST_OBSERVERS, robust_loop
+from bwdesign.study.robust import ROBUST_OBSERVERS, robust_loop, stage_disturbance
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The six parameters of the +-5 % box.
@@ -83,7 +83,7 @@ def row(config, tuning, label: str, box, observer: str, search_limit: float) -> 
         out["search"] = f"not searched (one certificate takes {took:.0f} s)"
         return out
     loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
-    dist = config.disturbance if config.disturbance and not config.disturbance.none else None
+    dist = stage_disturbance(config)
     pr = prove_rate(
         loop,
         uncertainty=box,

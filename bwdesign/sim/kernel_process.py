@@ -37,7 +37,7 @@ import threading
 from collections.abc import Iterator
 from typing import Any
 
-__all__ = ["fork_is_safe", "running", "run", "active"]
+__all__ = ["fork_is_safe", "fork", "running", "run", "active"]
 
 
 def fork_is_safe() -> bool:
@@ -55,6 +55,25 @@ def fork_is_safe() -> bool:
     )
 
 
+def fork() -> int:
+    """``os.fork()`` for a child that works beside this process: the standard streams
+    flushed first (nothing buffered is written twice), SIGINT blocked across the fork and
+    left blocked in the child (0 returned there; it ignores Ctrl-C, its parent ends it),
+    restored here. ``OSError`` (no process to be had) with the mask restored."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError, AttributeError):  # closed or None
+            stream.flush()
+    old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        pid = os.fork()
+    except OSError:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        raise
+    if pid != 0:  # here: as before; the child keeps SIGINT blocked
+        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+    return pid
+
+
 class _Process:
     """The forked kernel process and its address (a Linux abstract-namespace socket: no
     file). Each process that asks (the one that forked it, or a child forked from that
@@ -70,19 +89,13 @@ class _Process:
         except OSError:
             listener.close()
             raise
-        for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
-            with contextlib.suppress(OSError, ValueError, AttributeError):
-                stream.flush()
-        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
-            pid = os.fork()
+            pid = fork()
         except OSError:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
             listener.close()
             raise
         if pid == 0:  # the kernel process (SIGINT stays blocked): never returns
             _serve(listener, self.owner)
-        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
         listener.close()
         self.pid = pid
         self.connections: dict[int, Any] = {}  # pid -> its connection's file

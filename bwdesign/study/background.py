@@ -24,7 +24,6 @@ import io
 import os
 import pickle
 import signal
-import sys
 import threading
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -66,24 +65,15 @@ class Background:
         self._done = threading.Condition()
         self._finished = False
         read, write = os.pipe()
-        for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
-            try:
-                if stream is not None:
-                    stream.flush()
-            except (OSError, ValueError):  # closed or broken: nothing to write twice either
-                pass
-        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
-            pid = os.fork()
+            pid = kernel_process.fork()  # streams flushed, SIGINT blocked in the child
         except OSError:
-            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
             os.close(read)
             os.close(write)
             raise
         if pid == 0:  # the child (SIGINT stays blocked): never returns
             os.close(read)
             _child(tasks, write)
-        signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
         self.pid = pid
         os.close(write)
         self._reader = threading.Thread(target=self._read, args=(read,), daemon=True)

@@ -176,8 +176,8 @@ class _Run:
 
         self.beside = background.start([(p, quietly(p)) for p in parts])
         if self.beside is not None:
+            says = {"tier_synthesis": _TIERS, "robust": _robust_says(self)}
             for p in parts:
-                says = {"tier_synthesis": _TIERS, "robust": _robust_says(self)}
                 if says.get(p, _CERTIFYING) is not None:
                     self.say(says.get(p, _CERTIFYING))
 

@@ -32,11 +32,11 @@ from ..design.robust import certified_envelope
 from ..design.tuning import DigitalTuning
 from ..errors import InternalError
 from ..model.config import StageConfig
-from ..model.uncertainty import UncertaintyBox
+from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from ..sim.falsify import falsify
 from .result import RobustLoop, RobustStudy
 
-__all__ = ["robust_study", "robust_loop", "ROBUST_OBSERVERS"]
+__all__ = ["robust_study", "robust_loop", "stage_disturbance", "ROBUST_OBSERVERS"]
 
 #: The falsifier's search beside each certificate (:func:`bwdesign.sim.falsify.falsify`).
 #: 64 interior plants and 6 rounds of 16 (224 plants with the 64 corners of a six-parameter
@@ -46,6 +46,13 @@ __all__ = ["robust_study", "robust_loop", "ROBUST_OBSERVERS"]
 FALSIFIER = {"interior": 64, "rounds": 6, "per_round": 16, "seed": 0}
 #: The observers of the robust section, in table order.
 ROBUST_OBSERVERS = ("phso", "phdo")
+
+
+def stage_disturbance(config: StageConfig) -> DisturbanceBound | None:
+    """The stage's ``[uncertainty.disturbance]`` bound the robust section carries (None:
+    none stated, or stated as none)."""
+    d = config.disturbance
+    return d if d and not d.none else None
 
 
 def robust_loop(
@@ -61,7 +68,7 @@ def robust_loop(
     ref = config.reference
     gains = tuning.observer_gains_for(observer)
     loop = ClosedLoop.from_config(config, observer=observer, law=tuning, saturate=False)
-    dist = config.disturbance if config.disturbance and not config.disturbance.none else None
+    dist = stage_disturbance(config)
     found = falsify(loop, box, ref, disturbance=dist, **FALSIFIER)
     stable = found.stable
     rate = found.input_rate_max if stable else math.nan
@@ -115,7 +122,7 @@ def robust_study(config: StageConfig, tuning: DigitalTuning, udot_max: float) ->
         if has_box
         else ()
     )
-    dist = config.disturbance if config.disturbance and not config.disturbance.none else None
+    dist = stage_disturbance(config)
     return RobustStudy(
         udot_max=udot_max,
         bounds=box.bounds(config.plant) if has_box else {},
