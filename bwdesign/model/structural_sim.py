@@ -230,14 +230,22 @@ def _rk4_nu1(
             else:
                 zf, yc, after = after, math.inf * sigma, None
         else:
-            raise SolverError(
-                f"more than 8 events within one integration step at t = {t:.6g} s; raise the "
-                "upsampling factor"
-            )
+            raise _too_many_events(t)
         if not (math.isfinite(y) and math.isfinite(v)):
-            raise SolverError(f"the structural simulation diverged at t = {j * h:.6g} s")
+            raise _diverged(j * h)
     ys[-1], vs[-1], zs[-1] = y, v, zf(y)
     return ys, vs, zs
+
+
+def _too_many_events(t: float) -> SolverError:
+    return SolverError(
+        f"more than 8 events within one integration step at t = {t:.6g} s; raise the "
+        "upsampling factor"
+    )
+
+
+def _diverged(t: float) -> SolverError:
+    return SolverError(f"the structural simulation diverged at t = {t:.6g} s")
 
 
 def rk4_compiled(
@@ -250,12 +258,9 @@ def rk4_compiled(
     pars = (p.m, p.c, p.k, p.alpha, p.beta, p.gamma, p.delta)
     code, step, t, ys, vs, zs = rk4_nu1(pars, fine, h, steps_per_sample, total, x0)
     if code == 1:
-        raise SolverError(
-            f"more than 8 events within one integration step at t = {t:.6g} s; raise the "
-            "upsampling factor"
-        )
+        raise _too_many_events(t)
     if code == 2:
-        raise SolverError(f"the structural simulation diverged at t = {step * h:.6g} s")
+        raise _diverged(step * h)
     return ys, vs, zs
 
 
