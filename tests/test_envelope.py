@@ -41,3 +41,41 @@ def test_margin_and_bad_inputs(experiment):
         derive_envelope(experiment, ref, margin=0.5)
     with pytest.raises(InputError, match="sharp step"):
         derive_envelope(experiment, Step(amplitude=1.0))
+
+
+def test_the_envelope_is_kept_by_its_exact_arguments(experiment, monkeypatch):
+    """Asked again with the same arguments, the envelope comes back without the inverse
+    being run; the next float of the amplitude, another margin or another stage is a new
+    envelope; a reference that does not pickle is derived every time."""
+    from bwdesign.memo import Memo
+    from bwdesign.model import envelope as E
+
+    runs = []
+    real = E.feedforward_input
+
+    def counted(*a, **k):
+        runs.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(E, "_ENVELOPES", Memo(16))
+    monkeypatch.setattr(E, "feedforward_input", counted)
+    ref = Sine(amplitude=80.0, offset=100.0, frequency=1.0)
+    a = derive_envelope(experiment, ref)
+    assert derive_envelope(experiment, ref) == a and len(runs) == 1
+    assert derive_envelope(experiment, Sine(amplitude=80.0, offset=100.0, frequency=1.0)) == a
+    assert len(runs) == 1
+    b = derive_envelope(experiment, Sine(amplitude=np.nextafter(80.0, 81.0), offset=100.0,
+                                         frequency=1.0))  # fmt: skip
+    c = derive_envelope(experiment, ref, margin=1.5)
+    assert len(runs) == 3 and b.udot_max != a.udot_max and c.udot_max == 1.5 * a.udot_max
+
+    class Local(Sine):  # defined in a function: does not pickle
+        pass
+
+    local = Local(amplitude=80.0, offset=100.0, frequency=1.0)
+    assert derive_envelope(experiment, local).udot_max == a.udot_max
+    assert derive_envelope(experiment, local).udot_max == a.udot_max
+    assert len(runs) == 5
+    with pytest.raises(InputError, match="sharp step"):  # refusals are never kept
+        derive_envelope(experiment, Step(amplitude=1.0))
+    assert len(E._ENVELOPES) == 3

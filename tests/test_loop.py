@@ -19,6 +19,7 @@ from bwdesign import (
 from bwdesign.control.analysis import stability_interval
 from bwdesign.design.tuning import MarginRequirements, digital_tuning, observer_gains
 from bwdesign.errors import InputError
+from bwdesign.memo import Memo
 from bwdesign.model.plant import discretize
 from bwdesign.observers.gains import discrete_gains, error_matrix
 from bwdesign.output.jsonenc import json_safe
@@ -203,7 +204,7 @@ def test_digital_tuning_is_kept_by_its_exact_arguments(experiment, monkeypatch):
         calls.append(args[1])
         return real_tune(*args)
 
-    monkeypatch.setattr(T, "_MEMO", {})
+    monkeypatch.setattr(T, "_MEMO", Memo(16))
     monkeypatch.setattr(T, "_tune", counted)
     a = digital_tuning(experiment, DT, integral_ratio=0.45)
     b = digital_tuning(experiment, DT, integral_ratio=0.45)

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import copy
 import math
-import pickle
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -16,6 +14,7 @@ from ..control.controllers import TuningWarning, make_controller
 from ..control.loop import ClosedLoop
 from ..control.systems import LoopSystems, loop_systems, stability
 from ..errors import ConfigError, InputError
+from ..memo import Memo
 from ..model.params import BoucWenParams
 from ..model.plant import check_dt
 from ..model.uncertainty import UncertaintyBox
@@ -387,31 +386,13 @@ def digital_tuning(
         raise InputError(f"margins must be a MarginRequirements, got {margins!r}")
     n_candidates = integer(n_candidates, "n_candidates", within=Range(1, 10_000))
     args = (params, dt, gains, observer_radius, integral_ratio, mismatch, uncertainty, delay)
-    key = _memo_key((*args, margins, n_candidates))
-    if key is not None and key in _MEMO:
-        return copy.deepcopy(_MEMO[key])
-    tuning = _tune(*args, margins, n_candidates)
-    if key is not None:
-        while len(_MEMO) >= _MEMO_SIZE:
-            _MEMO.pop(next(iter(_MEMO)))
-        _MEMO[key] = copy.deepcopy(tuning)
-    return tuning
+    return _MEMO.get((*args, margins, n_candidates), lambda: _tune(*args, margins, n_candidates))
 
 
 #: :func:`digital_tuning`'s answers kept by their exact arguments, in this process: it is
 #: a pure function of them (the report's parts, the robust design and the checks ask for
 #: the same stage's tuning again). A copy goes out, so no caller changes another's.
-_MEMO: dict[bytes, DigitalTuning] = {}
-_MEMO_SIZE = 16
-
-
-def _memo_key(args: tuple) -> bytes | None:
-    """The arguments' exact bytes (pickled: every float to the bit), or None (unpicklable:
-    not kept)."""
-    try:
-        return pickle.dumps(args, protocol=pickle.HIGHEST_PROTOCOL)
-    except Exception:  # noqa: BLE001 - an argument that does not pickle: computed each time
-        return None
+_MEMO: Memo[DigitalTuning] = Memo(16)
 
 
 def _tune(

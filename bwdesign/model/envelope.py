@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..memo import Memo
 from ..validate import UDOT_MAX, Range, integer, real
 from .inverse import inverse_input
 from .params import BoucWenParams
@@ -162,6 +163,25 @@ def derive_envelope(
     margin = real(margin, "envelope margin", within=Range(1.0, 1e6))
     periods = integer(periods, "periods", within=Range(2, 1000))
     steps_per_period = integer(steps_per_period, "steps_per_period", within=Range(10, 10**7))
+    args = (params, reference, margin, periods, steps_per_period, allow_unbounded)
+    return _ENVELOPES.get(args, lambda: _derive(*args))
+
+
+#: :func:`derive_envelope`'s answers kept by their exact arguments, in this process (a
+#: pure function of them; the commands and the report's parts ask for the stage's
+#: envelope again).
+_ENVELOPES: Memo[Envelope] = Memo(16)
+
+
+def _derive(
+    params: BoucWenParams,
+    reference: Reference,
+    margin: float,
+    periods: int,
+    steps_per_period: int,
+    allow_unbounded: bool,
+) -> Envelope:
+    """:func:`derive_envelope` of checked arguments."""
     T = reference.period
     if T is not None:
         n = periods

@@ -1,0 +1,63 @@
+"""Answers of pure functions kept by their exact arguments, in this process.
+
+A :class:`Memo` keeps a bounded number of answers, each under the pickled bytes of the
+arguments that produced it (every float to the bit, so a changed argument is a new
+key). A copy goes in and a copy comes out, so no caller can change what another
+caller is given. Arguments that do not pickle (a user's own class defined in a
+function, say) are not kept: the function is computed each time.
+
+Only pure functions of their arguments belong here: the package keeps
+:func:`bwdesign.digital_tuning` and :func:`bwdesign.model.envelope.derive_envelope`
+(the report's parts, the checks and the commands ask for the same stage's answers
+again).
+"""
+
+from __future__ import annotations
+
+import copy
+import pickle
+from collections.abc import Callable
+from typing import Any, Generic, TypeVar
+
+__all__ = ["Memo"]
+
+T = TypeVar("T")
+
+
+class Memo(Generic[T]):
+    """At most ``size`` answers, the oldest dropped first."""
+
+    def __init__(self, size: int = 16):
+        self.size = size
+        self._kept: dict[bytes, T] = {}
+
+    @staticmethod
+    def key(args: tuple) -> bytes | None:
+        """The arguments' exact bytes, or None (they do not pickle: not kept)."""
+        try:
+            return pickle.dumps(args, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # noqa: BLE001 - an argument that does not pickle: computed each time
+            return None
+
+    def get(self, args: tuple, compute: Callable[[], T]) -> T:
+        """The answer for ``args``: a copy of the kept one, else ``compute()`` (kept)."""
+        key = self.key(args)
+        if key is not None and key in self._kept:
+            return copy.deepcopy(self._kept[key])
+        answer = compute()
+        if key is not None:
+            while len(self._kept) >= self.size:
+                self._kept.pop(next(iter(self._kept)))
+            self._kept[key] = copy.deepcopy(answer)
+        return answer
+
+    def clear(self) -> None:
+        """Forget every kept answer."""
+        self._kept.clear()
+
+    def __len__(self) -> int:
+        return len(self._kept)
+
+    def __contains__(self, args: Any) -> bool:
+        key = self.key(args)
+        return key is not None and key in self._kept
