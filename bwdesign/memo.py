@@ -7,9 +7,10 @@ caller is given. Arguments that do not pickle (a user's own class defined in a
 function, say) are not kept: the function is computed each time.
 
 Only pure functions of their arguments belong here: the package keeps
-:func:`bwdesign.digital_tuning` and :func:`bwdesign.model.envelope.derive_envelope`
-(the report's parts, the checks and the commands ask for the same stage's answers
-again).
+:func:`bwdesign.digital_tuning`, :func:`bwdesign.model.envelope.derive_envelope` and
+:func:`bwdesign.certify` (the report's parts, the design searches, the checks and the
+commands ask for the same stage's answers again). A function replaced inside the package
+(a test's monkeypatch) is not an argument: :func:`clear_all` forgets what was kept.
 """
 
 from __future__ import annotations
@@ -19,9 +20,20 @@ import pickle
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
 
-__all__ = ["Memo"]
+__all__ = ["Memo", "clear_all"]
 
 T = TypeVar("T")
+
+
+#: Every :class:`Memo` made, for :func:`clear_all`.
+_ALL: list[Memo] = []
+
+
+def clear_all() -> None:
+    """Forget every answer every :class:`Memo` keeps (after the package's own functions
+    were replaced, say: a test's monkeypatch)."""
+    for memo in _ALL:
+        memo.clear()
 
 
 class Memo(Generic[T]):
@@ -30,6 +42,7 @@ class Memo(Generic[T]):
     def __init__(self, size: int = 16):
         self.size = size
         self._kept: dict[bytes, T] = {}
+        _ALL.append(self)
 
     @staticmethod
     def key(args: tuple) -> bytes | None:

@@ -134,6 +134,29 @@ def _own_study_cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("BWDESIGN_CACHE_DIR", str(tmp_path_factory.mktemp("study-cache")))
 
 
+@pytest.fixture(autouse=True)
+def _nothing_kept_across_a_patch(monkeypatch):
+    """The package keeps pure functions' answers (bwdesign.memo); a test that replaces
+    anything (monkeypatch.setattr, setitem, delattr, delitem) computes afresh: every kept
+    answer is forgotten when it patches and when it ends, so no answer computed under a
+    patch reaches another test and no test's patch is hidden by an answer kept before."""
+    from bwdesign.memo import clear_all
+
+    patched = []
+    for name in ("setattr", "setitem", "delattr", "delitem"):
+        real = getattr(monkeypatch, name)
+
+        def forgetting(*args, _real=real, **kwargs):
+            clear_all()
+            patched.append(True)
+            return _real(*args, **kwargs)
+
+        object.__setattr__(monkeypatch, name, forgetting)
+    yield
+    if patched:
+        clear_all()
+
+
 @pytest.fixture(params=["paper_experiment", "paper_simulation_corrected"])
 def usable_plant(request):
     """Both bounded paper presets."""

@@ -280,6 +280,32 @@ def test_unbounded_model_needs_permission():
 # -- solver trouble is a status, never a traceback ------------------------------------------
 
 
+def test_a_report_is_kept_by_its_exact_arguments(monkeypatch):
+    """The same checked arguments give the kept report without solving again (a copy: a
+    caller's change reaches no one); the next float of the envelope is solved again. A
+    test's patch forgets what was kept (tests/conftest.py), so no patch is hidden."""
+    from bwdesign.certify import tiers as T
+
+    solved = []
+    real = T._certify
+    monkeypatch.setattr(T, "_certify", lambda *a: solved.append(a[2]) or real(*a))
+    p, env = preset("paper_experiment"), EXPERIMENT_ENVELOPE
+    a = certify(p, PAPER_GAINS, udot_max=env, dt=DT)
+    b = certify(p, list(PAPER_GAINS), udot_max=env, dt=DT)  # the same checked arguments
+    assert len(solved) == 1 and b is not a
+    for x, y in zip(a.certificates, b.certificates, strict=True):
+        fields = ("name", "holds", "status", "decay_rate")
+        assert [getattr(x, f) for f in fields] == [getattr(y, f) for f in fields]
+        assert x.P is None if y.P is None else np.array_equal(x.P, y.P)
+    b.certificates[0].details["changed"] = True
+    assert "changed" not in certify(p, PAPER_GAINS, udot_max=env, dt=DT).certificates[0].details
+    c = certify(p, PAPER_GAINS, udot_max=np.nextafter(env, 1e9), dt=DT)
+    assert len(solved) == 2 and c.udot_max > a.udot_max
+    monkeypatch.setattr(T, "TIERS", T.TIERS)  # any patch: nothing kept survives it
+    certify(p, PAPER_GAINS, udot_max=env, dt=DT)
+    assert len(solved) == 3
+
+
 def test_solver_failure_is_reported(experiment, monkeypatch):
     monkeypatch.setattr(lmi_core, "SOLVERS", ("NO_SUCH_SOLVER",))
     monkeypatch.setattr(lmi_core, "_OPTIONS", {"NO_SUCH_SOLVER": {}})

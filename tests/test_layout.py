@@ -15,8 +15,8 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "bwdesign"
 
 #: Layers, lowest first: a layer imports only from layers below it (or itself).
-#: ``errors``, ``_version``, ``validate``, ``interrupts``, ``memo``, ``output`` and ``plotting`` import
-#: nothing above them;
+#: ``errors``, ``_version``, ``validate``, ``interrupts``, ``memo``, ``output`` and
+#: ``plotting`` import nothing above them;
 #: ``plotting`` imports nothing from bwdesign at all, so any layer may call it.
 LAYERS = (
     ("errors", "_version", "extras", "validate", "interrupts", "memo"),

@@ -81,6 +81,7 @@ import numpy as np
 from scipy.linalg import solve_continuous_lyapunov
 
 from ..errors import InputError
+from ..memo import Memo
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time
 from ..model.uncertainty import UncertaintyBox
@@ -657,8 +658,30 @@ def certify(
     gains = tuple(check_gains(params, gains).tolist())
     if uncertainty is not None:
         _check_robust_request(params, uncertainty, dt, input_range)
-    sc = scale_continuous(params, error_matrix(params, gains))
     wanted = _wanted_tiers(tiers, dt)
+    args = (params, gains, udot_max, decay, dt, wanted, uncertainty, input_range, noise_max)
+    return _CERTIFIED.get(args, lambda: _certify(*args))
+
+
+#: :func:`certify`'s reports kept by their exact (checked) arguments, in this process: a
+#: pure function of them, asked again by the report's parts, the design searches and
+#: ``export-c``. A copy goes out.
+_CERTIFIED: Memo[CertificateReport] = Memo(32)
+
+
+def _certify(
+    params: BoucWenParams,
+    gains: tuple[float, float, float],
+    udot_max: float,
+    decay: float,
+    dt: float | None,
+    wanted: Any,
+    uncertainty: UncertaintyBox | None,
+    input_range: tuple[float, float] | None,
+    noise_max: float,
+) -> CertificateReport:
+    """:func:`certify` of checked arguments (``wanted``: the tiers to compute)."""
+    sc = scale_continuous(params, error_matrix(params, gains))
     certs = []
     prev: dict[str, TierCertificate] = {}
     for name in TIERS:
