@@ -294,10 +294,10 @@ def test_a_scheduler_that_does_not_answer_times_out(tune):
         port = s.getsockname()[1]
     sc = draw_scenarios(P, EXACT, 2, seed=0)
     with pytest.raises(SweepError, match="no Dask scheduler answered"):
-        run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tcp://127.0.0.1:{port}", timeout=2)
+        run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tcp://127.0.0.1:{port}", timeout=0.5)
     # a well-formed tls:// address without a TLS configuration: said, not a TypeError
     with pytest.raises(SweepError, match="could not connect .* TLS"):
-        run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tls://127.0.0.1:{port}", timeout=2)
+        run_sweep(_spec(tune, ("phso",)), sc, scheduler=f"tls://127.0.0.1:{port}", timeout=0.5)
 
 
 def test_a_failing_chunk_is_reported_not_dropped(tune, monkeypatch):
