@@ -71,6 +71,25 @@ def test_noise_enters_the_bound():
     assert noisy.input_bounds["noise"] == 0.1
 
 
+def test_a_certificate_is_kept_by_its_exact_arguments(monkeypatch):
+    """Asked again with the same loop, box, envelope and reference, the certificate comes
+    back without solving (a copy); another seed of the interior samples is solved."""
+    import importlib
+
+    robust = importlib.import_module("bwdesign.certify.robust")
+    solved = []
+    real = robust._certify
+    monkeypatch.setattr(robust, "_certify", lambda *a: solved.append(a[7]) or real(*a))
+    p, box = _custom(), UncertaintyBox.from_dict({"a3": {"rel": 0.02}})
+    a = _certify(p, box, interior_samples=1, a=0.99)
+    b = _certify(p, box, interior_samples=1, a=0.99)
+    assert solved == [0] and b is not a and b.tracking_bound == a.tracking_bound
+    b.input_bounds["noise"] = 1.0  # a caller's copy
+    assert _certify(p, box, interior_samples=1, a=0.99).input_bounds["noise"] == 0.0
+    _certify(p, box, interior_samples=1, a=0.99, seed=1)
+    assert solved == [0, 1]
+
+
 @pytest.mark.parametrize(
     ("rel", "why"),
     [

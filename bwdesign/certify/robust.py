@@ -123,6 +123,7 @@ import numpy as np
 from ..control.controllers import DiscreteTrackingController
 from ..control.loop import ClosedLoop
 from ..errors import InputError
+from ..memo import Memo
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import discretize, hysteresis_slope_range
 from ..model.reference_cover import require_coverable, sup_abs
@@ -299,6 +300,29 @@ def certify_robust(
     below_nyquist(reference, lp.dt)
     require_coverable(reference, lp.dt)
     uncertainty.check(params)  # every corner (so every plant in the box) bounded
+    args = (loop, uncertainty, udot_max, reference, noise_max, a, interior_samples, seed)
+    return _CERTIFIED.get((*args, disturbance), lambda: _certify(*args, disturbance))
+
+
+#: :func:`certify_robust`'s certificates kept by their exact (checked) arguments, in this
+#: process (a pure function of them; the report's parts and the rate search ask again).
+_CERTIFIED: Memo[RobustCertificate] = Memo(16)
+
+
+def _certify(
+    loop: ClosedLoop,
+    uncertainty: UncertaintyBox,
+    udot_max: float,
+    reference: Reference,
+    noise_max: float,
+    a: float | None,
+    interior_samples: int,
+    seed: int,
+    disturbance: DisturbanceBound | None,
+) -> RobustCertificate:
+    """:func:`certify_robust` of checked arguments."""
+    lp, observer = _loop(loop)
+    params = loop.model
     vertices = uncertainty.vertices(params)
     rng = np.random.default_rng(seed)
     # a box of zero width is the nominal plant alone: nothing inside to sample
