@@ -59,6 +59,13 @@ def _module_name(path: Path, root: Path = PKG) -> str:
     return ".".join(parts)
 
 
+@functools.cache
+def _parsed(path: Path) -> ast.Module:
+    """The module's syntax tree, parsed once per run (several rules read every file;
+    no rule changes a tree)."""
+    return ast.parse(path.read_text(), str(path))
+
+
 def _imports(path: Path, modules: set[str]) -> list[str]:
     """Absolute names of every module imported by ``path`` (function bodies included).
 
@@ -68,7 +75,7 @@ def _imports(path: Path, modules: set[str]) -> list[str]:
     mod = _module_name(path)
     package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
     out = []
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+    for node in ast.walk(_parsed(path)):
         if isinstance(node, ast.Import):
             out += [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -229,7 +236,7 @@ def _private_imports(path: Path, modules: set[str], root: Path = PKG) -> list[st
     """
     mod = _module_name(path, root)
     package = mod if path.name == "__init__.py" else mod.rpartition(".")[0]
-    tree = ast.parse(path.read_text(), str(path))
+    tree = _parsed(path)
     bound: dict[str, str] = {}  # local name -> bwdesign module it is bound to
     out = []
     for node in ast.walk(tree):
@@ -307,7 +314,7 @@ def _plain_raises(tree: ast.AST) -> list[int]:
 
 
 def test_every_exception_class_is_in_errors():
-    trees = {m: ast.parse(p.read_text(), str(p)) for m, p in FILES.items()}
+    trees = {m: _parsed(p) for m, p in FILES.items()}
     home = set(_exception_classes(trees["bwdesign.errors"]))
     assert {"SweepError", "UsageError", "TuningWarning", "InputError"} <= home
     for mod, tree in trees.items():
@@ -336,7 +343,7 @@ def test_no_plain_builtin_error_is_raised():
     bad = {
         mod: lines
         for mod, path in FILES.items()
-        if (lines := _plain_raises(ast.parse(path.read_text(), str(path))))
+        if (lines := _plain_raises(_parsed(path)))
     }
     assert not bad, f"raise a typed error from bwdesign/errors.py instead: {bad}"
 
@@ -393,7 +400,7 @@ def _over_limits(f: ast.FunctionDef) -> set[str]:
 def test_public_functions_stay_within_the_limits():
     found: dict[str, set[str]] = {}
     for mod, path in FILES.items():
-        for name, f in _public_functions(mod, ast.parse(path.read_text(), str(path))):
+        for name, f in _public_functions(mod, _parsed(path)):
             if over := _over_limits(f):
                 found[name] = over
     bad = {n: sorted(o) for n, o in found.items()}
