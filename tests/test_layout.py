@@ -340,11 +340,7 @@ def test_moved_exception_classes_stay_importable_where_they_were():
 
 
 def test_no_plain_builtin_error_is_raised():
-    bad = {
-        mod: lines
-        for mod, path in FILES.items()
-        if (lines := _plain_raises(_parsed(path)))
-    }
+    bad = {mod: lines for mod, path in FILES.items() if (lines := _plain_raises(_parsed(path)))}
     assert not bad, f"raise a typed error from bwdesign/errors.py instead: {bad}"
 
 
