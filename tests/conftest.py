@@ -234,6 +234,8 @@ class WrittenReport:
 
     out_dir: Path
     certified: bool
+    #: the study cache the report was computed into (read-only, like the report)
+    cache_dir: Path | None = None
 
     @property
     def md(self) -> str:
@@ -245,20 +247,28 @@ class WrittenReport:
 
 
 def write_report_once(tmp_path_factory, name: str, config_path: Path) -> WrittenReport:
-    """``write_report`` of ``config_path`` (quiet, dated :data:`REPORT_DATE`), once per run."""
+    """``write_report`` of ``config_path`` (quiet, dated :data:`REPORT_DATE`), once per run,
+    into an empty study cache kept beside it (``WrittenReport.cache_dir``: what a report
+    computed with a cache keeps, for tests/test_study_cache.py to read back)."""
     from bwdesign.model.config import load_config
+    from bwdesign.output.files import ResultCache
     from bwdesign.report.certified import write_report
+    from bwdesign.study.cache import StudyCache
 
     def build(path: Path) -> None:
         path.mkdir(parents=True)
         outcome = write_report(
-            load_config(config_path), path / "report", quiet=True, date=REPORT_DATE
+            load_config(config_path),
+            path / "report",
+            quiet=True,
+            date=REPORT_DATE,
+            cache=StudyCache(ResultCache(path / "cache")),
         )
         (path / "certified.json").write_text(json.dumps(outcome.certified))
 
     path = once(tmp_path_factory, name, build)
     certified = json.loads((path / "certified.json").read_text())
-    return WrittenReport(out_dir=path / "report", certified=certified)
+    return WrittenReport(out_dir=path / "report", certified=certified, cache_dir=path / "cache")
 
 
 @pytest.fixture(scope="session")
