@@ -85,25 +85,29 @@ PAPER_CONFIG = ROOT / "configs" / "paper_experiment.toml"
 #: the Date line of the reports the tests write (two runs must compare equal)
 REPORT_DATE = "2000-01-01 00:00 UTC"
 
-#: The heaviest test modules, heaviest first, by their measured process CPU with one
-#: BLAS thread (s, rounded); the others follow in file order. Under xdist the modules are
+#: The heaviest test modules, heaviest first, by the sum of their tests' durations under
+#: ``make test`` (s, rounded); the others follow in file order. Under xdist the modules are
 #: given out in this order (``make test``: one module per worker at a time, ``--dist
 #: loadfile --no-loadscope-reorder``), so no 20-50 s module runs alone at the end.
-#: test_claims_report.py comes after test_report.py has had time to write the shared
-#: paper_experiment report (:func:`paper_report`) that both read.
-HEAVY_MODULES = (  # seconds of test time each, measured on 2 cores (junit, 2026-12-02)
-    "tests/test_structural.py",  # 25: the benchmark records and their identification
-    "tests/test_report.py",  # 19: the shared report, a second one, the not-certified one
-    "tests/test_codegen.py",  # 18: the C compiler
-    "tests/test_sweep.py",  # 14: a report with [sweep] and [uncertainty]
-    "tests/test_study_cache.py",  # 13
-    "tests/test_identify_extensions.py",  # 11
-    "tests/test_claims_report.py",  # 10: the saturating and the unbounded reports
-    "tests/test_robust_reference.py",  # 8
-    "tests/test_robust_observer.py",  # 8
-    "tests/test_baselines.py",  # 8
-    "tests/test_loop.py",  # 8
-    "tests/test_docs_site.py",  # 7: Chromium
+#: test_claims_report.py and test_study_cache.py come after test_report.py has had time
+#: to write the shared paper_experiment report (:func:`paper_report`) they read.
+HEAVY_MODULES = (  # seconds of test time each, measured on 2 cores (durations, 2026-12-03)
+    "tests/test_codegen.py",  # 18: the C compiler, 1e5-step records
+    "tests/test_report.py",  # 15: the shared report, a second one, the not-certified one
+    "tests/test_identify_extensions.py",  # 12
+    "tests/test_sweep.py",  # 11: a report with [sweep] and [uncertainty]
+    "tests/test_claims_report.py",  # 9: the saturating and the unbounded reports
+    "tests/test_robust_observer.py",  # 7
+    "tests/test_baselines.py",  # 6
+    "tests/test_loop.py",  # 6
+    "tests/test_robust.py",  # 6
+    "tests/test_observers.py",  # 6
+    "tests/test_docs_site.py",  # 7 when the site is built: Chromium
+    "tests/test_kernel_process.py",  # 5: fresh interpreters
+    "tests/test_structural.py",  # 5: the benchmark records
+    "tests/test_robust_reference.py",  # 4
+    "tests/test_simulate.py",  # 4
+    "tests/test_study_cache.py",  # 4: reads the shared report's cache
 )
 
 
