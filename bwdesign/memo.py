@@ -18,8 +18,9 @@ from __future__ import annotations
 
 import copy
 import pickle
+import threading
 from collections.abc import Callable
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 __all__ = ["Memo", "clear_all"]
 
@@ -43,6 +44,7 @@ class Memo(Generic[T]):
     def __init__(self, size: int = 16):
         self.size = size
         self._kept: dict[bytes, T] = {}
+        self._lock = threading.Lock()  # a sweep's threads may ask at once
         _ALL.append(self)
 
     @staticmethod
@@ -56,22 +58,23 @@ class Memo(Generic[T]):
     def get(self, args: tuple, compute: Callable[[], T]) -> T:
         """The answer for ``args``: a copy of the kept one, else ``compute()`` (kept)."""
         key = self.key(args)
-        if key is not None and key in self._kept:
-            return copy.deepcopy(self._kept[key])
-        answer = compute()
+        with self._lock:
+            kept = self._kept.get(key) if key is not None else None
+        if kept is not None:
+            return copy.deepcopy(kept)
+        answer = compute()  # outside the lock: a long computation blocks no other caller
         if key is not None:
-            while len(self._kept) >= self.size:
-                self._kept.pop(next(iter(self._kept)))
-            self._kept[key] = copy.deepcopy(answer)
+            kept = copy.deepcopy(answer)
+            with self._lock:
+                while len(self._kept) >= self.size:
+                    self._kept.pop(next(iter(self._kept)))
+                self._kept[key] = kept
         return answer
 
     def clear(self) -> None:
         """Forget every kept answer."""
-        self._kept.clear()
+        with self._lock:
+            self._kept.clear()
 
     def __len__(self) -> int:
         return len(self._kept)
-
-    def __contains__(self, args: Any) -> bool:
-        key = self.key(args)
-        return key is not None and key in self._kept
