@@ -8,10 +8,10 @@ function, say) are not kept: the function is computed each time.
 
 Only pure functions of their arguments belong here: the package keeps
 :func:`bwdesign.digital_tuning`, :func:`bwdesign.model.envelope.derive_envelope`,
-:func:`bwdesign.certify` and :func:`bwdesign.certify_robust` (the report's parts, the
-design searches, the checks and the commands ask for the same stage's answers again). A
-function replaced inside the package (a test's monkeypatch) is not an argument:
-:func:`clear_all` forgets what was kept.
+:func:`bwdesign.certify`, :func:`bwdesign.certify_robust` and :func:`bwdesign.synthesize`
+(the report's parts, the design searches, the checks and the commands ask for the same
+stage's answers again). A function replaced inside the package (a test's monkeypatch) is
+not an argument: :func:`clear_all` forgets what was kept.
 """
 
 from __future__ import annotations

@@ -306,6 +306,25 @@ def test_a_report_is_kept_by_its_exact_arguments(monkeypatch):
     assert len(solved) == 3
 
 
+def test_a_synthesis_is_kept_by_its_exact_arguments(monkeypatch):
+    """The same checked arguments give the kept synthesis (a copy), another decay is
+    solved; a refusal is raised each time, never kept."""
+    from bwdesign.design import gains as G
+
+    solved = []
+    real = G._synthesize
+    monkeypatch.setattr(G, "_synthesize", lambda *a: solved.append(a[2]) or real(*a))
+    p = preset("paper_experiment")
+    a = synthesize(p, udot_max=400.0, decay=50.0)
+    b = synthesize(p, udot_max=400.0, decay=50.0)
+    assert solved == [50.0] and a.feasible and b is not a and b.gains == a.gains
+    synthesize(p, udot_max=400.0, decay=51.0)
+    assert solved == [50.0, 51.0]
+    for _ in range(2):
+        with pytest.raises(InputError, match="sampled tier needs"):
+            synthesize(p, udot_max=400.0, tier="sampled")
+
+
 def test_solver_failure_is_reported(experiment, monkeypatch):
     monkeypatch.setattr(lmi_core, "SOLVERS", ("NO_SUCH_SOLVER",))
     monkeypatch.setattr(lmi_core, "_OPTIONS", {"NO_SUCH_SOLVER": {}})

@@ -24,6 +24,7 @@ from ..certify.frequency import continuous_family, sampled_family
 from ..certify.results import K_HAT_CAP, OUTPUT_ROW, CertificateReport, Margin, SynthesisResult
 from ..certify.tiers import certify, certify_discrete, largest_decay, largest_rate
 from ..errors import GainError, InputError
+from ..memo import Memo
 from ..model.params import BoucWenParams, require_bounded
 from ..model.plant import check_sample_time, discretize
 from ..observers.gains import check_gains, delta_transition, discrete_gains, error_matrix
@@ -137,9 +138,31 @@ def synthesize(
         dt = check_sample_time(params, dt)
     if pole_radius is not None:
         pole_radius = real(pole_radius, "pole_radius (rad/s)", within=POLE_RADIUS)
-    R = default_pole_radius(params, dt) if pole_radius is None else pole_radius
     if tier is not None and tier not in ("theorem1", "lipschitz", "sector", "sampled"):
         raise InputError(f"unknown tier {tier!r}; tiers are theorem1, lipschitz, sector, sampled")
+    if tier == "sampled" and dt is None:
+        raise InputError("the sampled tier needs the sample time dt (s)")
+    args = (params, udot_max, decay, pole_radius, dt, allow_unbounded, tier, bool(explain))
+    return _SYNTHESISED.get(args, lambda: _synthesize(*args))
+
+
+#: :func:`synthesize`'s results kept by their exact (checked) arguments, in this process
+#: (a pure function of them; the report's tier searches and the commands ask again).
+_SYNTHESISED: Memo[SynthesisResult] = Memo(32)
+
+
+def _synthesize(
+    params: BoucWenParams,
+    udot_max: float,
+    decay: float,
+    pole_radius: float | None,
+    dt: float | None,
+    allow_unbounded: bool,
+    tier: str | None,
+    explain: bool,
+) -> SynthesisResult:
+    """:func:`synthesize` of checked arguments."""
+    R = default_pole_radius(params, dt) if pole_radius is None else pole_radius
     if tier in ("theorem1", "lipschitz"):
         from .tiers import synthesize_tier
 
@@ -152,8 +175,6 @@ def synthesize(
             dt=dt,
             allow_unbounded=allow_unbounded,
         )
-    if tier == "sampled" and dt is None:
-        raise InputError("the sampled tier needs the sample time dt (s)")
     if dt is None or tier == "sector":
         res = _synthesize_continuous(params, udot_max, decay, R, allow_unbounded, explain)
         if dt is None:
