@@ -20,7 +20,7 @@ install: $(STAMP)
 # -n auto: one pytest-xdist worker per core. --dist loadfile runs each test module on
 # one worker, so its module fixtures are computed once; --no-loadscope-reorder gives the
 # modules out in the order tests/conftest.py sets (the heaviest first).
-# compileall: the package's bytecode written once (only what changed), so the suite's ~60
+# compileall: the package's bytecode written once (only what changed), so the suite's
 # fresh interpreters read it instead of compiling bwdesign each (an editable install
 # writes none, and PYTHONDONTWRITEBYTECODE=1 stops Python writing it; measured on a
 # fresh clone: 116.9 s without, 107.2 s with).
