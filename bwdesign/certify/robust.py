@@ -301,7 +301,8 @@ def certify_robust(
     require_coverable(reference, lp.dt)
     uncertainty.check(params)  # every corner (so every plant in the box) bounded
     args = (loop, uncertainty, udot_max, reference, noise_max, a, interior_samples, seed)
-    return _CERTIFIED.get((*args, disturbance), lambda: _certify(*args, disturbance))
+    computed = (lp, observer)  # the loop's matrices, built once: not part of the key
+    return _CERTIFIED.get((*args, disturbance), lambda: _certify(*args, disturbance, *computed))
 
 
 #: :func:`certify_robust`'s certificates kept by their exact (checked) arguments, in this
@@ -319,9 +320,10 @@ def _certify(
     interior_samples: int,
     seed: int,
     disturbance: DisturbanceBound | None,
+    lp: _Loop,
+    observer: str,
 ) -> RobustCertificate:
-    """:func:`certify_robust` of checked arguments."""
-    lp, observer = _loop(loop)
+    """:func:`certify_robust` of checked arguments (``lp``, ``observer``: :func:`_loop`'s)."""
     params = loop.model
     vertices = uncertainty.vertices(params)
     rng = np.random.default_rng(seed)
