@@ -42,6 +42,22 @@ def test_l1_norms_are_the_sums_of_the_impulse_responses():
     assert peak.l1_norms(1.01 * np.eye(2), np.ones((2, 1)), np.ones((1, 2))) is None
 
 
+def test_l1_norms_of_a_badly_scaled_loop_are_computed_balanced():
+    """A stiff loop's matrix in badly scaled coordinates: scipy's P fails its check there
+    (paper_simulation_corrected's +-5 % box lost its peak-to-peak bounds that way), the
+    balanced one does not, and the sums are those of the well scaled matrix."""
+    rng = np.random.default_rng(1)
+    Q, _ = np.linalg.qr(rng.normal(size=(7, 7)))
+    A0 = Q @ np.diag(np.linspace(0.1, 0.95, 7)) @ Q.T + 0.3 * np.triu(rng.normal(size=(7, 7)), 1)
+    A0 *= 0.95 / np.max(np.abs(np.linalg.eigvals(A0)))
+    t = 2.0 ** np.array([-24, 12, -8, 20, -4, 0, 16])
+    A = A0 * t[:, None] / t[None, :]  # T A0 T^-1
+    B, L = rng.normal(size=(7, 2)), rng.normal(size=(3, 7))
+    assert peak.decreasing_lyapunov(A) is None and peak.decreasing_lyapunov(A0) is not None
+    got = peak.l1_norms(A, B * t[:, None], L / t[None, :])
+    assert got is not None and np.allclose(got, peak.l1_norms(A0, B, L), rtol=1e-9)
+
+
 def test_peak_bounds_cover_a_time_varying_slope_with_the_worst_signs():
     """z+ = A(rho_k) z + B f: the small gain's bound holds for rho_k and f at their bounds."""
     rng = np.random.default_rng(7)
