@@ -243,3 +243,97 @@ def test_hysteresis_slope_range_bounds_every_jump_and_is_attained():
     # outside the bounded class: alpha
     q = BoucWenParams(a1=1e5, a2=500.0, a3=1e5, alpha=0.5, beta=0.1, gamma=0.3)
     assert hysteresis_slope_range(q) == (0.5, 0.5)
+
+
+def _turning_inputs(rng, step, second, n):
+    """Input steps ``v_k`` with ``|v_k| <= step`` and ``|v_k - v_(k-1)| <= second``: runs of
+    random length at full, zero or random second difference (reversals of every speed)."""
+    v, out = rng.uniform(-step, step), []
+    while len(out) < n:
+        a = second * rng.choice([-1.0, 1.0, 0.0, rng.uniform(-1, 1)])
+        for _ in range(int(rng.integers(1, 4 * max(1, int(step / second))))):
+            v = float(np.clip(v + a, -step, step))
+            out.append(v)
+    return out[:n]
+
+
+def test_hysteresis_jump_bound_holds_once_the_input_turns_and_is_reached():
+    """Over random +-10 % boxes of bounded plants: every jump of a plant inside the box,
+    once the input has turned, is within the bound of the box's corners; and for one plant
+    the bound is reached (saturated at -h_max, then turning at the largest second difference)."""
+    from itertools import product
+
+    from bwdesign.model.plant import hysteresis_jump_bound, hysteresis_slope_range
+
+    rng = np.random.default_rng(5)
+    for _ in range(12):
+        beta = rng.uniform(0.05, 2.0)
+        gamma = rng.uniform(-0.8, 0.8) * beta
+        nominal = dict(alpha=rng.uniform(0.1, 5.0), beta=beta, gamma=gamma)
+        corners = [
+            BoucWenParams(a1=1e5, a2=500.0, a3=1e5, **{k: v * f for (k, v), f in
+                                                      zip(nominal.items(), fs, strict=True)})
+            for fs in product((0.9, 1.1), repeat=3)
+        ]  # fmt: skip
+        corners = [c for c in corners if c.bounded_class().bounded]
+        hi = max(hysteresis_slope_range(c)[1] for c in corners)
+        step = 10 ** rng.uniform(-3, 0)
+        second = step * 10 ** rng.uniform(-3, -0.5)
+        bound = hysteresis_jump_bound(corners, step, second)
+        assert bound <= hi * step and hysteresis_jump_bound(corners, step) == hi * step
+        for _ in range(4):
+            f = rng.uniform(0.9, 1.1, size=3)
+            p = BoucWenParams(a1=1e5, a2=500.0, a3=1e5, alpha=nominal["alpha"] * f[0],
+                              beta=beta * f[1], gamma=gamma * f[2])  # fmt: skip
+            if not p.bounded_class().bounded:
+                continue
+            hm = p.bounded_class().h_max
+            h, u, turned, worst = rng.uniform(-hm, hm), 0.0, False, 0.0
+            prev = None
+            for v in _turning_inputs(rng, step, second, 3000):
+                turned = turned or (prev is not None and prev * v <= 0)
+                h1 = hysteresis_increment(p, h, u, u + v)
+                if turned:
+                    worst = max(worst, abs(h1 - h))
+                h, u, prev = h1, u + v, v
+            assert worst <= bound * (1 + 1e-9)
+    # the worst input (saturated low, then turning up as fast as allowed) on every corner
+    # of wide boxes stays within the box's bound, and for one plant reaches it
+    p = preset("paper_experiment")
+    step, second = 0.08, 2.5e-4
+    for fa, fb, fg in ((0.5, 1.0, 1.0), (1.0, 0.5, 1.0), (1.0, 1.0, 0.2), (0.6, 0.8, 0.5)):
+        corners = [
+            p.replace(alpha=p.alpha * a, beta=p.beta * b, gamma=p.gamma * g)
+            for a, b, g in product((fa, 2 - fa), (fb, 2 - fb), (fg, 2 - fg))
+        ]
+        bound = hysteresis_jump_bound(corners, step, second)
+        assert max(_worst_turn(c, step, second) for c in corners) <= bound * (1 + 1e-9)
+    bound = hysteresis_jump_bound([p], step, second)
+    assert 0.98 * bound <= _worst_turn(p, step, second) <= bound
+    assert bound < 0.25 * hysteresis_slope_range(p)[1] * step  # what the turn buys here
+
+
+def _worst_turn(p, step, second):
+    """The largest jump of ``p`` from ``x3 = -h_max`` as the input turns up with second
+    differences ``second`` until its steps reach ``step``."""
+    h, u, v, reached = -p.bounded_class().h_max, 0.0, 0.0, 0.0
+    for _ in range(int(step / second) + 50):
+        v = min(step, v + second)
+        h1 = hysteresis_increment(p, h, u, u + v)
+        reached, h, u = max(reached, h1 - h), h1, u + v
+    return reached
+
+
+def test_hysteresis_jump_bound_refuses_bad_input():
+    from bwdesign.model.plant import hysteresis_jump_bound
+
+    p = preset("paper_experiment")
+    for args, match in (
+        (([], 0.1, 1e-3), "at least one plant"),
+        (([p], -0.1, 1e-3), "step"),
+        (([p], 0.1, 0.0), "second"),
+        (([p], 0.1, math.nan), "second"),
+    ):
+        with pytest.raises(InputError, match=match):
+            hysteresis_jump_bound(*args)
+    assert hysteresis_jump_bound([p], 0.0, 1e-3) == 0.0

@@ -113,6 +113,37 @@ def test_the_falsifier_searches_past_the_corners_and_stays_below_the_bound(certi
         falsify(_loop(preset("paper_experiment")), box, REF, rounds=-1)
 
 
+def test_a_second_difference_envelope_bounds_the_jump_where_the_input_turns():
+    """certify_robust(uddot_max=): the plant's jump bounded by hysteresis_jump_bound, a
+    smaller certified bound that still covers every case the falsifier finds (whose
+    input keeps the envelope assumed), the assumption stated in the verdict; a bad
+    envelope is refused and the kept answers tell the two apart."""
+    from bwdesign.design import second_envelope
+    from bwdesign.model.plant import hysteresis_jump_bound
+
+    p = preset("paper_experiment")
+    loop, box = _loop(p), UncertaintyBox.from_dict({})  # the nominal loop
+    found = falsify(loop, box, REF)
+    assert found.input_accel_max > 0 and found.input_rate_max <= UDOT
+    env = second_envelope(found.input_accel_max)
+    assert env == pytest.approx(1.1 * found.input_accel_max)
+    kw = {"uncertainty": box, "udot_max": UDOT, "reference": REF}
+    rc = certify_robust(loop, **kw)
+    rc2 = certify_robust(loop, uddot_max=env, **kw)
+    assert rc2.holds, rc2.status
+    assert found.worst_maxe <= rc2.tracking_bound < 0.5 * rc.tracking_bound
+    jump = hysteresis_jump_bound(box.vertices(p), UDOT * DT, env * DT**2)
+    assert rc2.details["jump_bound"] == rc2.input_bounds["j"] == pytest.approx(jump)
+    assert rc2.details["uddot_max"] == env and rc.details["uddot_max"] is None
+    assert f"|u_(k+1) - 2 u_k + u_(k-1)| <= dt^2 x {env:.4g} V/s^2 (assumed" in rc2.status
+    assert "second differences" not in rc.status
+    assert certify_robust(loop, **kw).tracking_bound == rc.tracking_bound  # not the kept rc2
+    for bad in (0.0, -1.0, float("nan"), "fast"):
+        with pytest.raises(InputError, match="uddot_max"):
+            certify_robust(loop, uddot_max=bad, **kw)
+    assert second_envelope(float("nan")) is None and second_envelope(0.0) is None
+
+
 def test_the_verdict_says_whether_the_rate_envelope_is_proved(certified):
     rc, _, _ = certified
     d = rc.details

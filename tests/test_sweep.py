@@ -125,6 +125,12 @@ def test_batch_matches_simulate(tune, observer, label, kw):
         want = [m.me, m.maxe, m.rmse, *r.estimation_rmse, r.saturated_fraction]
         # the same operations on the same numbers (sim/zoh.py, sim/compiled.py): to the bit
         assert [float(v) for v in got] == want
+        # the input's largest step and second difference over the window, from its samples
+        inw = (r.t >= r.window[0] - 1e-12) & (r.t <= r.window[1] + 1e-12)
+        du = np.diff(r.u, prepend=r.u[0])  # the run starts from u_prev = u[0] here
+        d2 = np.diff(du, prepend=0.0)
+        assert b.input_rate_max[i] == pytest.approx(np.max(np.abs(du[inw])) / DT, rel=1e-12)
+        assert b.input_accel_max[i] == pytest.approx(np.max(np.abs(d2[inw])) / DT**2, rel=1e-9)
 
 
 def test_the_agreement_scenarios_are_not_sensitive_to_rounding(tune):

@@ -86,7 +86,10 @@ that the loop does. ``details["input_step_bound"]`` is the bound this certificat
 gives on ``|u_{k+1} - u_k|`` (from the same ellipsoid, with ``u = cu' z + su' s``);
 it is far above the envelope in practice (the ellipsoid is shaped for the tracking
 error), so the report and the robust design check the envelope on the simulated
-corners instead.
+corners instead. With ``uddot_max``, a second envelope on the input's second
+differences, ``|j|`` is bounded by :func:`~bwdesign.model.plant.hysteresis_jump_bound`
+of the box's corners (the jump's slope is high only just after the input turns, where
+its steps are small) instead of ``hi |du|``; that envelope is always an assumption.
 
 Certificate
 -----------
@@ -125,12 +128,12 @@ from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..memo import Memo
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import discretize, hysteresis_slope_range
+from ..model.plant import discretize, hysteresis_jump_bound, hysteresis_slope_range
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
 from ..observers.gains import check_gains, discrete_gains
-from ..validate import NONNEGATIVE, UDOT_MAX, below_nyquist, real
+from ..validate import NONNEGATIVE, POSITIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
 from .ellipsoid import copy_error_bound, jump_mismatch
 from .results import RobustCertificate
@@ -226,6 +229,7 @@ def certify_robust(
     interior_samples: int = 16,
     seed: int = 0,
     disturbance: DisturbanceBound | None = None,
+    uddot_max: float | None = None,
 ) -> RobustCertificate:
     """Certify a sampled PHSO (or PHDO) tracking loop over every plant in an uncertainty box.
 
@@ -266,6 +270,13 @@ def certify_robust(
         A slowly varying input-equivalent disturbance ``d`` on every plant of the box
         (``x2' = ... + a3 (u + d)``, ``|d| <= input_max``, ``|d'| <= rate_max``; the
         stage's ``[uncertainty.disturbance]``). ``None`` (or both bounds 0): none.
+    uddot_max : float, optional
+        A second envelope the certificate assumes, on the input's second differences:
+        ``|u_{k+1} - 2 u_k + u_{k-1}| <= uddot_max dt^2`` (V/s^2). With it the plant's
+        hysteresis jump is bounded by
+        :func:`~bwdesign.model.plant.hysteresis_jump_bound` (the slope is high only just
+        after the input turns, where its steps are small) instead of ``hi |du|``; the
+        verdict states it as an assumption. ``None``: no such assumption.
 
     Returns
     -------
@@ -299,10 +310,13 @@ def certify_robust(
         raise InputError(f"reference must be a bwdesign Reference, got {reference!r}")
     below_nyquist(reference, lp.dt)
     require_coverable(reference, lp.dt)
+    if uddot_max is not None:
+        uddot_max = real(uddot_max, "uddot_max (V/s^2)", within=POSITIVE)
     uncertainty.check(params)  # every corner (so every plant in the box) bounded
     args = (loop, uncertainty, udot_max, reference, noise_max, a, interior_samples, seed)
+    rest = (disturbance, uddot_max)
     computed = (lp, observer)  # the loop's matrices, built once: not part of the key
-    return _CERTIFIED.get((*args, disturbance), lambda: _certify(*args, disturbance, *computed))
+    return _CERTIFIED.get((*args, *rest), lambda: _certify(*args, *rest, *computed))
 
 
 #: :func:`certify_robust`'s certificates kept by their exact (checked) arguments, in this
@@ -320,6 +334,7 @@ def _certify(
     interior_samples: int,
     seed: int,
     disturbance: DisturbanceBound | None,
+    uddot_max: float | None,
     lp: _Loop,
     observer: str,
 ) -> RobustCertificate:
@@ -332,7 +347,10 @@ def _certify(
     interior = uncertainty.sample(params, rng, int(interior_samples)) if varying else []
     st = _setup(params, lp, observer, udot_max, disturbance_bounds(disturbance))
     size = float(sup_abs(reference, lp.dt, np.eye(9)[:1])[0]) + params.bounded_class().h_max
-    st = replace(st, scale=size)
+    # the plant's jump over the box (every constant it uses is extreme at a corner)
+    second = None if uddot_max is None else uddot_max * lp.dt**2
+    jump = hysteresis_jump_bound(vertices, st.du, second)
+    st = replace(st, scale=size, uddot_max=uddot_max, jump=jump)
     data_v = [_plant_data(st, tp) for tp in vertices]
     data_i = [_plant_data(st, tp) for tp in interior]
     data = data_v + data_i
@@ -491,6 +509,10 @@ class _Setup:
     dist: tuple[float, float] = (0.0, 0.0)
     #: the size of the loop's signals, ``sup |x_d| + h_max`` (length unit)
     scale: float = 0.0
+    #: the input's second-difference envelope assumed (V/s^2), None: none
+    uddot_max: float | None = None
+    #: the plant's jump over one sample, over the box (``model.plant.hysteresis_jump_bound``)
+    jump: float = math.inf
 
     @property
     def n(self) -> int:
@@ -535,6 +557,7 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     mats = [_matrices(lp, Fv, gv, r) for r in rhos]
     Bref, bx3 = mats[0][1][:, :5], mats[0][1][:, 5]  # rho acts on neither
     hv, j, dh = _hyst_bounds(st.params, tp, st.du)
+    j = min(j, st.jump)
     copy_error = copy_error_bound(st.params, tp)
     if st.observer == "phdo":  # the step of (rho - 1) e3 + dh, |e3| <= the copy's error
         dh += (1 - st.rho_lo) * copy_error
@@ -573,20 +596,31 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     }
 
 
-def _rate_clause(step: float, udot_max: float, dt: float, unit: str) -> str:
+def _rate_clause(step: float, st: _Setup, dt: float, unit: str) -> str:
     """The verdict's input-rate clause: proved (the certificate's own bound on the input
     steps keeps the envelope it assumed, so the assumption holds once the loop is in
-    its steady set) or stated as the condition it is."""
+    its steady set) or stated as the condition it is; the second-difference envelope,
+    when one is assumed, is always stated as an assumption."""
+    udot_max = st.udot_max
     if step <= udot_max * dt:
-        return (
+        out = (
             f"and the loop's input keeps |u'| <= {udot_max:.4g} {unit}/s (proved: the "
             f"certificate bounds it by {step / dt:.4g} {unit}/s in steady state, a margin of "
             f"{udot_max * dt / step:.3g}x)"
         )
-    return (
-        f"if the loop's input keeps |u'| <= {udot_max:.4g} {unit}/s (assumed, not proved: "
-        f"this certificate bounds the loop's own input rate only by {step / dt:.4g} {unit}/s)"
-    )
+    else:
+        out = (
+            f"if the loop's input keeps |u'| <= {udot_max:.4g} {unit}/s (assumed, not proved: "
+            f"this certificate bounds the loop's own input rate only by {step / dt:.4g} "
+            f"{unit}/s)"
+        )
+    if st.uddot_max is not None:
+        out += (
+            f"{' and if' if step <= udot_max * dt else ' and'} its second differences keep "
+            f"|u_(k+1) - 2 u_k + u_(k-1)| <= dt^2 x {st.uddot_max:.4g} {unit}/s^2 (assumed, "
+            "not proved)"
+        )
+    return out
 
 
 def _conclude(
@@ -653,7 +687,7 @@ def _conclude(
             )
             + f": steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
             f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s, "
-            + _rate_clause(step, udot_max, dt, params.input_unit)
+            + _rate_clause(step, st, dt, params.input_unit)
         )
         if st.dist != (0.0, 0.0):
             unit = params.input_unit
@@ -690,6 +724,9 @@ def _conclude(
             # the envelope shown by the certificate itself (a fixed point), or assumed
             "rate_proved": bool(holds and step is not None and step <= udot_max * dt),
             "rate_margin": (udot_max * dt / step) if holds and step else None,
+            # the second-difference envelope assumed (None: none) and the jump bound it gives
+            "uddot_max": st.uddot_max,
+            "jump_bound": float(hb[1]),
         },
         **base,
     )

@@ -25,6 +25,7 @@ from .robust import (
     RobustDesign,
     RobustSearch,
     certified_envelope,
+    second_envelope,
     synthesize_robust,
 )
 from .robust_observer import RobustObserverSynthesis, synthesize_robust_observer
@@ -53,6 +54,7 @@ __all__ = [
     "RobustDesign",
     "RobustSearch",
     "certified_envelope",
+    "second_envelope",
     "ENVELOPE_MARGIN",
     "synthesize_robust_observer",
     "RobustObserverSynthesis",

@@ -63,6 +63,7 @@ __all__ = [
     "RobustSearch",
     "synthesize_robust",
     "certified_envelope",
+    "second_envelope",
     "ENVELOPE_MARGIN",
 ]
 
@@ -184,6 +185,14 @@ def certified_envelope(udot_max: float, simulated_rate: float) -> float:
     if float(simulated_rate) <= float(udot_max):
         return float(udot_max)
     return ENVELOPE_MARGIN * float(simulated_rate)
+
+
+def second_envelope(simulated_accel: float) -> float | None:
+    """The second-difference envelope to certify (``certify_robust(uddot_max=)``, V/s^2):
+    ``ENVELOPE_MARGIN`` x the largest ``|u_k - 2 u_(k-1) + u_(k-2)| / dt^2`` simulated;
+    None where none was measured (a diverged or a still input): no such assumption."""
+    a = float(simulated_accel)
+    return ENVELOPE_MARGIN * a if math.isfinite(a) and a > 0 else None
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import expm
 
 from ..errors import InputError
-from ..validate import DT, real
+from ..validate import DT, NONNEGATIVE, POSITIVE, real
 from .params import BoucWenParams, require_bounded
 
 __all__ = [
@@ -35,6 +35,7 @@ __all__ = [
     "rhs",
     "hysteresis_increment",
     "hysteresis_slope_range",
+    "hysteresis_jump_bound",
     "zoh_step",
     "simulate_zoh",
     "check_sample_time",
@@ -165,6 +166,82 @@ def hysteresis_slope_range(params: BoucWenParams) -> tuple[float, float]:
     if not bc.bounded:
         return (params.alpha, params.alpha)
     return (0.0, params.alpha + (params.beta - params.gamma) * bc.h_max)
+
+
+#: Grid of the input step in :func:`hysteresis_jump_bound` (its bound is within ``hi step /
+#: JUMP_GRID`` of the supremum it bounds).
+JUMP_GRID = 4096
+
+
+def hysteresis_jump_bound(
+    plants: list[BoucWenParams], step: float, second: float | None = None
+) -> float:
+    """Bound of one sample's hysteresis jump ``|x3_{k+1} - x3_k|`` of any plant in ``plants``.
+
+    The input's steps are bounded, ``|u_{k+1} - u_k| <= step``; with ``second``, so are
+    its second differences, ``|u_{k+1} - 2 u_k + u_{k-1}| <= second``. Without
+    ``second`` the bound is ``hi step`` (:func:`hysteresis_slope_range`, the largest
+    over ``plants``). With it, the slope is high only just after a reversal, where the
+    step is small:
+
+    - along a monotone path the slope ``psi = dx3/du`` of a bounded plant obeys
+      ``dpsi/dw = -c psi`` (``w`` the path length) with ``c = beta - gamma`` while
+      ``s x3 < 0`` and ``c = beta + gamma`` once ``s x3 >= 0``, where ``psi <= alpha``
+      (:func:`hysteresis_increment`'s two branches: ``psi = alpha - c g``); so from any
+      state ``psi(w) <= Psi(w)``, the solution from ``hi`` that decays at ``cA = min(beta
+      - gamma, beta + gamma)`` above ``alpha`` and at ``cB = beta + gamma`` below (each
+      constant the least, ``hi`` the largest and ``alpha`` the least over ``plants``: the
+      decay is slower, so ``Psi`` stays above every plant's slope);
+    - a step of size ``v`` in direction ``s`` ends a run of steps in that direction that
+      began after a step of the other sign or zero, so the path travelled in the run
+      before it is at least ``w_min(v) = sum_{m >= 1} max(0, v - m second)``;
+    - so the jump is at most ``int_{w_min(v)}^{w_min(v) + v} Psi``, maximised over ``0 <
+      v <= step`` on a grid of :data:`JUMP_GRID` intervals, each bounded from above
+      (``Psi`` decreases: the interval's smallest ``w_min`` and largest ``v``).
+
+    Never above ``hi step``. Plants outside the bounded class, or no ``second``: ``hi
+    step``.
+
+    Examples
+    --------
+    >>> from bwdesign.model.params import preset
+    >>> p = preset("paper_experiment")
+    >>> hi = hysteresis_slope_range(p)[1]
+    >>> hysteresis_jump_bound([p], 0.08) == hi * 0.08
+    True
+    >>> hysteresis_jump_bound([p], 0.08, 2.5e-4) < 0.3 * hi * 0.08
+    True
+    """
+    step = real(step, "step", within=NONNEGATIVE)
+    plants = list(plants)
+    if not plants:
+        raise InputError("hysteresis_jump_bound needs at least one plant")
+    hi = max(hysteresis_slope_range(p)[1] for p in plants)
+    flat = hi * step
+    if second is None or not all(p.bounded_class().bounded for p in plants) or step == 0:
+        return flat
+    second = real(second, "second", within=POSITIVE)
+    alpha = min(p.alpha for p in plants)
+    cb = min(p.beta + p.gamma for p in plants)
+    ca = min(min(p.beta - p.gamma, p.beta + p.gamma) for p in plants)
+    v = np.linspace(0.0, step, JUMP_GRID + 1)
+    m = np.maximum(np.ceil(v[:-1] / second) - 1.0, 0.0)  # positive terms of w_min
+    w0 = np.maximum(m * v[:-1] - second * m * (m + 1) / 2, 0.0) * (1 - 1e-12)
+    area = _slope_area(w0 + v[1:], hi, alpha, ca, cb) - _slope_area(w0, hi, alpha, ca, cb)
+    # the two areas are below hi w + 2 alpha / cb; their rounding is added
+    total = float(np.max(area)) + 8 * np.finfo(float).eps * (flat + 2 * hi * float(w0.max()))
+    return float(min(flat, total))
+
+
+def _slope_area(w: np.ndarray, hi: float, alpha: float, ca: float, cb: float) -> np.ndarray:
+    """``int_0^w Psi`` of :func:`hysteresis_jump_bound` (``Psi(0) = hi``)."""
+    if hi <= alpha:  # decays at cb from the start
+        return hi * -np.expm1(-cb * w) / cb
+    if ca == 0.0:  # never falls to alpha
+        return hi * w
+    knee = math.log(hi / alpha) / ca  # where Psi reaches alpha
+    first = hi * -np.expm1(-ca * np.minimum(w, knee)) / ca
+    return first + alpha * -np.expm1(-cb * np.maximum(w - knee, 0.0)) / cb
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,11 @@ def robust_section(doc: Document, study: Study) -> None:
         "function for every corner and both ends of the hysteresis jump-map slope and, per "
         "plant, by peak-to-peak (l1) bounds, the smaller kept (bwdesign.certify.robust). The "
         "certificate assumes the loop keeps an input-rate envelope: the stage's |u'| <= "
-        f"{udot_max:.4g} {iu}/s, or 1.1 x the fastest input rate found when that is faster."
+        f"{udot_max:.4g} {iu}/s, or 1.1 x the fastest input rate found when that is faster; "
+        "and a second-difference envelope, 1.1 x the largest |u_k - 2 u_(k-1) + u_(k-2)| / "
+        "dt^2 found, with which the plant's hysteresis jump is bounded where the input turns "
+        "(bwdesign.model.plant.hysteresis_jump_bound). Both are assumptions, stated in each "
+        "verdict."
     )
     dist = part.disturbance
     if dist is not None:

@@ -70,6 +70,10 @@ class BatchResult:
     input_rate_max : ndarray
         Largest ``|u_k - u_{k-1}| / dt`` of the applied input over ``window``
         (input unit/s); NaN when unstable.
+    input_accel_max : ndarray
+        Largest ``|u_k - 2 u_{k-1} + u_{k-2}| / dt^2`` of the applied input over
+        ``window`` (input unit/s^2), the second-difference envelope a robust certificate
+        may assume (:func:`bwdesign.certify_robust`'s ``uddot_max``); NaN when unstable.
     saturated_fraction : ndarray
         Share of the samples whose applied input is at a ``u_limits`` bound (the run's
         every sample, as :attr:`bwdesign.sim.SimulationResult.saturated_fraction`; a
@@ -90,6 +94,7 @@ class BatchResult:
     estimation_rmse: np.ndarray
     estimation_maxe: np.ndarray
     input_rate_max: np.ndarray
+    input_accel_max: np.ndarray
     saturated_fraction: np.ndarray
     window: tuple[float, float]
     samples: int
@@ -203,6 +208,7 @@ def simulate_batch(
         ),
         estimation_maxe=np.where(stable[:, None], np.stack(acc["est_max"], axis=1), np.nan),
         input_rate_max=np.where(stable, acc["du_max"] / loop.dt, np.nan),
+        input_accel_max=np.where(stable, acc["d2u_max"] / loop.dt**2, np.nan),
         saturated_fraction=acc["saturated"] / np.where(stable, run.n, acc["ran"]),
         window=(float(win[0]), float(win[1])),
         samples=run.n,
@@ -256,6 +262,7 @@ def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, 
         "est_sq": [out[:, 3 + j].copy() for j in range(3)],
         "est_max": [out[:, 6 + j].copy() for j in range(3)],
         "du_max": out[:, 9].copy(),
+        "d2u_max": out[:, 20].copy(),
         "saturated": out[:, 19].copy(),
         # a diverged scenario's samples run, up to and including the divergence
         "ran": out[:, 11] + 1.0,
@@ -281,7 +288,7 @@ def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     q0 = loop.controller.start(start.x0[0], start.u_prev, ff[0]).q
     x0 = [float(v) for v in start.x0]
     st = np.array([*x0, float(start.u_prev), float(q0)])
-    out = np.zeros((N, 20))
+    out = np.zeros((N, 21))
     for lo, hi, rows, d, noisy in _chunks(run, noise, dist):
         flags = np.array([float(bool(loop.delay)), limit, float(noisy)])
         args = (plant[lo:hi], law, ref, flags, st, rows, d, out[lo:hi])
@@ -315,7 +322,7 @@ def _run_batch(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     start = run.start
     st = np.array([*(float(v) for v in start.x0), *(float(v) for v in start.xhat0)] + [0.0])
     st[6] = float(start.u_prev)
-    out = np.zeros((N, 20))
+    out = np.zeros((N, 21))
     for lo, hi, rows, d, noisy in _chunks(run, noise, dist):
         flags = np.array(
             [float(c.four), float(c.phso), float(bool(c.delay)), float(bool(c.compensate)),

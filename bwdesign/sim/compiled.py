@@ -126,10 +126,11 @@ def observer_batch(plant, consts, ref, noise, dist, out):
         Sensor noise (read only with the noise flag).
     dist : (R, n)
         Input disturbance per sample: no row (none), one row (common) or one per scenario.
-    out : (N, 20)
+    out : (N, 21)
         Written: sum_abs, sum_sq, max_abs, est_sq x3, est_max x3, du_max, alive, the step
         of the divergence, the state there (x1, x2, x3, xhat1, xhat2, xhat_lumped, u_a),
-        the number of samples whose applied input is at an input limit.
+        the number of samples whose applied input is at an input limit, d2u_max (the
+        largest ``|u_k - 2 u_(k-1) + u_(k-2)|`` of the applied input in the window).
     """
     _observer_batch(plant, *consts, ref, noise, dist, out)
 
@@ -179,8 +180,9 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
     lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
     lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
     N = plant.shape[0]
-    S = np.empty((_LANES, 11))  # x1, x2, x3, xhat1, xhat2, xhat3, dhat, lumped, u_prev, u_a, q
-    A = np.empty((_LANES, 11))  # out[:, 0:10] and out[:, 19]
+    # x1, x2, x3, xhat1, xhat2, xhat3, dhat, lumped, u_prev, u_a, q, the last input step
+    S = np.empty((_LANES, 12))
+    A = np.empty((_LANES, 12))  # out[:, 0:10], out[:, 19] and out[:, 20]
     alive = np.empty(_LANES, np.bool_)
     for i0 in range(0, N, _LANES):
         nl = min(_LANES, N - i0)
@@ -188,7 +190,7 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
             S[j, 0], S[j, 1], S[j, 2] = start[0], start[1], start[2]
             S[j, 3], S[j, 4], S[j, 5] = start[3], start[4], start[5]
             S[j, 6], S[j, 7] = 0.0, start[5]
-            S[j, 8], S[j, 9], S[j, 10] = start[6], start[6], 0.0
+            S[j, 8], S[j, 9], S[j, 10], S[j, 11] = start[6], start[6], 0.0, 0.0
             A[j, :] = 0.0
             alive[j] = True
             out[i0 + j, 10] = 1.0
@@ -250,8 +252,11 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 up = applied
                 if applied <= lw[5] or applied >= lw[6]:
                     A[j, 10] += 1.0
+                du = applied - uprev
                 if inw:
-                    A[j, 9] = max(A[j, 9], abs(applied - uprev))
+                    A[j, 9] = max(A[j, 9], abs(du))
+                    A[j, 11] = max(A[j, 11], abs(du - S[j, 11]))
+                S[j, 11] = du
                 S[j, 0], S[j, 1], S[j, 2] = x1, x2, x3
                 S[j, 3], S[j, 4], S[j, 5], S[j, 6], S[j, 7] = h1, h2, h3, hd, hw
                 S[j, 8], S[j, 9], S[j, 10] = up, ua, q
@@ -275,6 +280,7 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
             for c in range(10):
                 out[i, c] = A[j, c]
             out[i, 19] = A[j, 10]
+            out[i, 20] = A[j, 11]
 
 
 @njit(cache=True)
@@ -298,7 +304,7 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
         dd = 0.0
         zp = start[0]
         drow = i if rows > 1 else 0
-        sa = sq = mx = dum = sat = 0.0
+        sa = sq = mx = dum = sat = d2m = dup = 0.0
         out[i, 10] = 1.0
         out[i, 11] = -1.0
         for k in range(n):
@@ -331,14 +337,18 @@ def baseline_batch(plant, law, ref, flags, start, noise, dist, out):
             up = applied
             if applied <= lo or applied >= hi:
                 sat += 1.0
+            du = applied - uprev
             if inw:
-                dum = max(dum, abs(applied - uprev))
+                dum = max(dum, abs(du))
+                d2m = max(d2m, abs(du - dup))
+            dup = du
             if not (abs(x1) <= limit and abs(x3) <= limit and abs(x2) <= vlim and abs(ua) < 1e300):
                 _stop(out, i, k, x1, x2, x3, 0.0, 0.0, 0.0, ua)
                 break
         out[i, 0], out[i, 1], out[i, 2] = sa, sq, mx
         out[i, 9] = dum
         out[i, 19] = sat
+        out[i, 20] = d2m
 
 
 @njit(cache=True)

@@ -40,7 +40,8 @@ class Falsification:
 
     ``worst_maxe``: max ``|x1 - x_d|``; ``worst_estimation_maxe``: max ``|x1hat - x1|``,
     ``|x2hat - x2|``, ``|x3hat - x3|`` (each over every plant tried, not necessarily the
-    same plant); ``input_rate_max``: the fastest ``|u'|`` seen; ``worst_plant``: where
+    same plant); ``input_rate_max``: the fastest ``|u'|`` seen, ``input_accel_max`` the
+    largest second difference ``|u_k - 2 u_(k-1) + u_(k-2)| / dt^2``; ``worst_plant``: where
     ``worst_maxe`` was found, ``found_by`` how (``"corner"``, ``"interior"`` or
     ``"search"``); ``plants``: how many were simulated; ``stable``: all of them were.
     """
@@ -48,6 +49,7 @@ class Falsification:
     worst_maxe: float
     worst_estimation_maxe: tuple[float, float, float]
     input_rate_max: float
+    input_accel_max: float
     worst_plant: BoucWenParams
     found_by: str
     plants: int
@@ -60,6 +62,7 @@ class Falsification:
             "worst_maxe": self.worst_maxe,
             "worst_estimation_maxe": list(self.worst_estimation_maxe),
             "input_rate_max": self.input_rate_max,
+            "input_accel_max": self.input_accel_max,
             "worst_plant": {k: getattr(self.worst_plant, k) for k in MODEL_FIELDS},
             "found_by": self.found_by,
             "plants": self.plants,
@@ -82,7 +85,8 @@ class _Search:
         self.how: list[str] = []
         self.window: tuple[float, float] = (0.0, 0.0)
         self.samples = 0
-        self.per_plant: list[tuple[float, np.ndarray, float, bool]] = []
+        # per plant: worst error, estimation errors, input rate, stable, input second difference
+        self.per_plant: list[tuple[float, np.ndarray, float, bool, float]] = []
 
     def run(self, plants: list[BoucWenParams], how: str) -> None:
         if not plants:
@@ -95,9 +99,10 @@ class _Search:
             maxe = float(np.max(res.maxe[sl])) if st else np.inf
             est = np.max(res.estimation_maxe[sl], axis=0) if st else np.full(3, np.inf)
             rate = float(np.max(res.input_rate_max[sl])) if st else np.inf
+            accel = float(np.max(res.input_accel_max[sl])) if st else np.inf
             self.plants.append(tp)
             self.how.append(how)
-            self.per_plant.append((maxe, est, rate, st))
+            self.per_plant.append((maxe, est, rate, st, accel))
         self.window, self.samples = tuple(res.window), res.samples
 
     def coords(self, tp: BoucWenParams) -> np.ndarray:
@@ -172,6 +177,7 @@ def falsify(
         worst_maxe=float(s.per_plant[i][0]),
         worst_estimation_maxe=tuple(float(x) for x in np.max(ests, axis=0)),
         input_rate_max=float(max(p[2] for p in s.per_plant)),
+        input_accel_max=float(max(p[4] for p in s.per_plant)),
         worst_plant=s.plants[i],
         found_by=s.how[i],
         plants=len(s.plants),

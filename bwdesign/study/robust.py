@@ -12,7 +12,10 @@ periods), as the certified bounds are peak bounds after the transient.
 A robust certificate assumes the loop keeps ``|u'| <= udot_max`` and does not
 prove it: the corners are simulated first, and when their input moves faster than
 the stage's envelope the certificate is asked for
-:func:`bwdesign.design.certified_envelope` of their fastest rate.
+:func:`bwdesign.design.certified_envelope` of their fastest rate. It also assumes a
+second-difference envelope, :func:`bwdesign.design.second_envelope` of the largest
+the falsifier's plants show, which bounds the plant's hysteresis jump more tightly
+(:func:`bwdesign.model.plant.hysteresis_jump_bound`); the verdict states both.
 
 A stage with ``[uncertainty.disturbance]`` (``StageConfig.disturbance``) has it in
 the certificate (``certify_robust(..., disturbance=)``) and in the corners'
@@ -28,7 +31,7 @@ import numpy as np
 
 from ..certify.robust import certify_robust
 from ..control.loop import ClosedLoop
-from ..design.robust import certified_envelope
+from ..design.robust import certified_envelope, second_envelope
 from ..design.tuning import DigitalTuning
 from ..errors import InternalError
 from ..model.config import StageConfig
@@ -73,7 +76,10 @@ def robust_loop(
     stable = found.stable
     rate = found.input_rate_max if stable else math.nan
     env = certified_envelope(udot_max, rate) if stable else udot_max
-    rc = certify_robust(loop, uncertainty=box, udot_max=env, reference=ref, disturbance=dist)
+    second = second_envelope(found.input_accel_max) if stable else None
+    rc = certify_robust(
+        loop, uncertainty=box, udot_max=env, reference=ref, disturbance=dist, uddot_max=second
+    )
     worst = found.worst_maxe if stable else math.nan
     worst_est = np.array(found.worst_estimation_maxe) if stable else np.full(3, math.nan)
     if rc.holds:
