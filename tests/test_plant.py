@@ -337,3 +337,41 @@ def test_hysteresis_jump_bound_refuses_bad_input():
         with pytest.raises(InputError, match=match):
             hysteresis_jump_bound(*args)
     assert hysteresis_jump_bound([p], 0.0, 1e-3) == 0.0
+
+
+def test_hysteresis_jump_change_bound_holds_at_every_sample():
+    """|j_(k+1) - j_k| <= hysteresis_jump_change_bound over random boxes and inputs whose
+    second differences are bounded, from the first sample on (no turn needed)."""
+    from itertools import product
+
+    from bwdesign.model.plant import hysteresis_jump_bound, hysteresis_jump_change_bound
+
+    rng = np.random.default_rng(11)
+    worst_share = 0.0
+    for _ in range(10):
+        beta = rng.uniform(0.05, 2.0)
+        nominal = dict(alpha=rng.uniform(0.1, 5.0), beta=beta, gamma=rng.uniform(-0.8, 0.8) * beta)
+        corners = [
+            BoucWenParams(a1=1e5, a2=500.0, a3=1e5, **{k: v * f for (k, v), f in
+                                                      zip(nominal.items(), fs, strict=True)})
+            for fs in product((0.95, 1.05), repeat=3)
+        ]  # fmt: skip
+        corners = [c for c in corners if c.bounded_class().bounded]
+        step = 10 ** rng.uniform(-3, 0)
+        second = step * 10 ** rng.uniform(-3, -0.5)
+        # from any state: the jump's own bound without the turn (hi step)
+        jump = hysteresis_jump_bound(corners, step)
+        change = hysteresis_jump_change_bound(corners, step, second, jump)
+        assert 0 < change <= 2 * jump
+        for p in corners[:3]:
+            hm = p.bounded_class().h_max
+            h, u, last = rng.uniform(-hm, hm), 0.0, None
+            for v in _turning_inputs(rng, step, second, 2000):
+                h1 = hysteresis_increment(p, h, u, u + v)
+                if last is not None:
+                    assert abs((h1 - h) - last) <= change * (1 + 1e-9) + 1e-15
+                    worst_share = max(worst_share, abs((h1 - h) - last) / change)
+                h, u, last = h1, u + v, h1 - h
+    assert worst_share > 0.3  # the bound is not vacuous on these inputs
+    with pytest.raises(InputError, match="bounded plants"):
+        hysteresis_jump_change_bound([], 0.1, 1e-3, 0.01)

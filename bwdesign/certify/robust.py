@@ -45,7 +45,15 @@ with ``E = dA/drho`` and ``x3_{k+1} - x3_k = j_k``. The ellipsoid is certified f
 time by ``sup_abs``), the ``rho`` coupling and the fast inputs; the quasi-static part
 ``c' G^-1 w_slow`` is bounded the same way and added to each peak.
 A loop that rejects a slowly varying model error (integral action, the PHDO's
-disturbance state) thus gets the credit the arbitrary-signal bound denied it. For
+disturbance state) thus gets the credit the arbitrary-signal bound denied it.
+
+The jump ``j`` enters ``z~`` through ``b_e = B_j - G^-1 b_x3``. With ``uddot_max`` its
+change from one sample to the next is bounded too
+(:func:`~bwdesign.model.plant.hysteresis_jump_change_bound`), and the same split with
+``Q = G^-1 b_e`` is exact: ``z~ = z' + Q j_k`` with ``z'+ = A(rho_k) z' + (rho_k - rho_c) E Q
+j_k - Q (j_{k+1} - j_k) + ...``. The certificate computes the per-plant peak-to-peak
+bounds with the jump both ways, fast and slow, and keeps the smaller
+(``details["jump_input"]``); a loop with integral action rejects a slow jump. For
 the PHDO ``rho = 1`` is fixed and there is no coupling term.
 
 The input disturbance (``disturbance=DisturbanceBound(input_max, rate_max)``)
@@ -128,7 +136,12 @@ from ..control.loop import ClosedLoop
 from ..errors import InputError
 from ..memo import Memo
 from ..model.params import BoucWenParams, require_bounded
-from ..model.plant import discretize, hysteresis_jump_bound, hysteresis_slope_range
+from ..model.plant import (
+    discretize,
+    hysteresis_jump_bound,
+    hysteresis_jump_change_bound,
+    hysteresis_slope_range,
+)
 from ..model.reference_cover import require_coverable, sup_abs
 from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox, disturbance_bounds
@@ -350,16 +363,23 @@ def _certify(
     # the plant's jump over the box (every constant it uses is extreme at a corner)
     second = None if uddot_max is None else uddot_max * lp.dt**2
     jump = hysteresis_jump_bound(vertices, st.du, second)
+    change = (
+        math.inf if second is None else hysteresis_jump_change_bound(vertices, st.du, second, jump)
+    )
     st = replace(st, scale=size, uddot_max=uddot_max, jump=jump)
-    data_v = [_plant_data(st, tp) for tp in vertices]
-    data_i = [_plant_data(st, tp) for tp in interior]
-    data = data_v + data_i
+    data = [_plant_data(st, tp) for tp in vertices + interior]
     # both covers of the reference (.robust_cover): the smaller certified bound
     # the ellipsoid on the per-sample cover first (the exact one if that fails); the
-    # peak-to-peak bounds of every cover, the smallest kept (_conclude)
+    # peak-to-peak bounds of every cover, the smallest kept (_conclude), and with the
+    # jump as a slow input too where its change is bounded (neither is smaller everywhere)
     covers = _covers(st, reference, data, noise_max)
+    every = list(covers)
+    if math.isfinite(change):
+        slow = replace(st, jump_change=change)
+        every += _covers(slow, reference, [_plant_data(slow, tp) for tp in vertices + interior],
+                         noise_max)  # fmt: skip
     for covered, dd in covers[::-1]:
-        rc = _certify_with(st, dd, len(vertices), covered, a, noise_max, covers)
+        rc = _certify_with(st, dd, len(vertices), covered, a, noise_max, every)
         if rc.holds:
             break
     return rc
@@ -513,6 +533,9 @@ class _Setup:
     uddot_max: float | None = None
     #: the plant's jump over one sample, over the box (``model.plant.hysteresis_jump_bound``)
     jump: float = math.inf
+    #: the change of that jump from one sample to the next (with ``uddot_max``: the jump is
+    #: then a slow input, module doc); inf: the jump is a fast input
+    jump_change: float = math.inf
 
     @property
     def n(self) -> int:
@@ -574,9 +597,14 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
     for A, _ in mats:  # the input steps' reference part, per rho end (input_step_bound)
         v = (A - np.eye(n)).T @ st.cu
         rows.append(((v @ GiB + st.cu @ Bref) @ M + st.su[:5] @ dM)[None, :])
-    # fast inputs (j, dh, n), then the disturbance's increment and within-sample remainder
+    # the jump: a fast input, or (with the second-difference envelope) a slow one whose
+    # quasi-static part G^-1 b_e j leaves its increments as the input (module doc)
+    b_e = mats[0][1][:, 6] - Gib  # rho acts on neither x3 nor j
+    slow = math.isfinite(st.jump_change)
+    Gie = np.linalg.solve(G, b_e) if slow else np.zeros(n)
+    # fast inputs (j or its change, dh, n), the disturbance's increment and remainder
     blocks = [
-        (A, np.column_stack([np.eye(n), B[:, 6] - Gib, B[:, 7:9], -Gid, B[:, 10:12]]))
+        (A, np.column_stack([np.eye(n), -Gie if slow else b_e, B[:, 7:9], -Gid, B[:, 10:12]]))
         for A, B in mats
     ]
     E_b = E if len(rhos) == 2 else None
@@ -589,6 +617,9 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
         "mats": mats,
         "Gib": Gib,
         "Gid": Gid,
+        "Gie": Gie,
+        # the bound of the jump's channel: the jump, or its change (at most twice the jump)
+        "jchan": min(st.jump_change, 2 * j) if slow else j,
         "a3": abs(tp.a3),
         "E": E_b,
         "rows": np.vstack(rows),
@@ -656,7 +687,7 @@ def _conclude(
                 bounds[i] = pk(i)
         if bounds[i] is None and holds:
             bounds[i] = peak(i)
-    method = "ellipsoid"
+    method, slow_jump = "ellipsoid", None
     half = (st.rhos[-1] - st.rhos[0]) / 2
     for (hb2, _, _), dd, l1 in peaks if holds else ():
         # the per-plant peak-to-peak bounds (.peak), where smaller
@@ -664,6 +695,10 @@ def _conclude(
             b = max(float(p[i]) + float(d["static"][i]) for p, d in zip(l1, dd, strict=True))
             if bounds[i] is None or b < bounds[i]:
                 bounds[i], method = b, "peak-to-peak"
+                if i == 0 and np.any(dd[0]["Gie"]):  # the jump a slow input: its change
+                    slow_jump = max(d["jchan"] for d in dd)
+                elif i == 0:
+                    slow_jump = None
         dyn1 = lambda v, j, l1=l1: l1[j][3] + half * l1[j][-1]  # noqa: E731
         step = min(step, input_step_bound(st, dd, dyn1, hb2, noise_max))
     if bounds[1] is not None:
@@ -727,6 +762,9 @@ def _conclude(
             # the second-difference envelope assumed (None: none) and the jump bound it gives
             "uddot_max": st.uddot_max,
             "jump_bound": float(hb[1]),
+            # the tracking bound's: the jump as a slow input (its change bounded) or a fast one
+            "jump_input": "fast" if slow_jump is None else "slow",
+            "jump_change_bound": slow_jump,
         },
         **base,
     )

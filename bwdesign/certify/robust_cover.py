@@ -76,14 +76,20 @@ def cover_inputs(
             dmax > 0 and d["E"] is not None
         ):  # the rho coupling of the disturbance's quasi-static part
             chan += half * np.abs(d["E"] @ d["Gid"]) * dmax
+        jv = d["hyst"][1]
+        if d["E"] is not None:  # the rho coupling of the slow jump's (0 for a fast one)
+            chan += half * np.abs(d["E"] @ d["Gie"]) * jv
         d["chan"] = chan
-        d["static"] += np.array([abs(c @ d["Gib"]) * hv for c in st.statics])
+        d["static"] += np.array(
+            [abs(c @ d["Gib"]) * hv + abs(c @ d["Gie"]) * jv for c in st.statics]
+        )
         if dmax > 0:
             d["static"] = d["static"] + np.array([abs(c @ d["Gid"]) * dmax for c in st.statics])
     chan = np.max([d["chan"] for d in data], axis=0)
     hb = np.max([d["hyst"] for d in data], axis=0)
     rem = disturbance_remainder(max(d["a3"] for d in data), st.dist[1], st.lp.dt)
-    W = np.concatenate([chan, [hb[1], hb[2], noise_max, dstep], rem])
+    jchan = max(d["jchan"] for d in data)  # the jump, or its change where it is slow
+    W = np.concatenate([chan, [jchan, hb[2], noise_max, dstep], rem])
     input_bounds = {
         "state_channels": chan.tolist(),
         "x3": float(hb[0]),
@@ -141,7 +147,7 @@ def input_step_bound(st: Any, data: list[dict], dyn, hb: np.ndarray, noise_max: 
                 + float(ref)
                 + abs(v @ Gib + cu @ B[:, 5]) * hv
                 + abs(su[5]) * j_
-                + (abs(cu @ B[:, 6]) + 2 * abs(su[6])) * j_
+                + (abs(v @ d["Gie"] + cu @ B[:, 6]) + 2 * abs(su[6])) * j_
                 + (abs(cu @ B[:, 7]) + 2 * abs(su[7])) * dh_
                 + (abs(cu @ B[:, 8]) + 2 * abs(su[8])) * noise_max
             )
@@ -170,7 +176,7 @@ def plant_peaks(st: Any, data: list[dict], W: np.ndarray) -> list[np.ndarray] | 
             ]
         )
         Wp = W.copy()  # this plant's own channel bounds
-        Wp[: n + 2] = np.concatenate([d["chan"], d["hyst"][1:]])
+        Wp[: n + 2] = np.concatenate([d["chan"], [d["jchan"], d["hyst"][2]]])
         pb = peak_bounds(d["blocks"], st.rhos, Wp, rows)
         if pb is None:
             return None

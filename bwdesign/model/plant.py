@@ -36,6 +36,7 @@ __all__ = [
     "hysteresis_increment",
     "hysteresis_slope_range",
     "hysteresis_jump_bound",
+    "hysteresis_jump_change_bound",
     "zoh_step",
     "simulate_zoh",
     "check_sample_time",
@@ -231,6 +232,33 @@ def hysteresis_jump_bound(
     # the two areas are below hi w + 2 alpha / cb; their rounding is added
     total = float(np.max(area)) + 8 * np.finfo(float).eps * (flat + 2 * hi * float(w0.max()))
     return float(min(flat, total))
+
+
+def hysteresis_jump_change_bound(
+    plants: list[BoucWenParams], step: float, second: float, jump: float
+) -> float:
+    """Bound of the change ``|j_{k+1} - j_k|`` of one sample's hysteresis jump from one
+    sample to the next, for any plant in ``plants`` (bounded class).
+
+    ``j_k = F(x3_k, du_k)`` with ``F(h, v) = H(h, v) - h`` (:func:`hysteresis_increment`)
+    and ``x3_{k+1} = x3_k + j_k``, so ``j_{k+1} - j_k = [F(x3_{k+1}, du_{k+1}) -
+    F(x3_{k+1}, du_k)] + [F(x3_{k+1}, du_k) - F(x3_k, du_k)]``. The first part is at most
+    ``hi |du_{k+1} - du_k| <= hi second`` (the slope in ``u`` is in ``[0, hi]``, either side
+    of 0); in the second, ``H`` moves with its start by a factor in ``[exp(-c |v|), 1]``
+    (``c = max(beta + gamma, beta - gamma)``, the decay of the state's sensitivity along
+    the path), so it is at most ``(1 - exp(-c step)) |j_k|``, with ``|j_k| <= jump``
+    (:func:`hysteresis_jump_bound`). Never above ``2 jump``.
+    """
+    step = real(step, "step", within=NONNEGATIVE)
+    second = real(second, "second", within=POSITIVE)
+    jump = real(jump, "jump", within=NONNEGATIVE)
+    plants = list(plants)
+    if not plants or not all(p.bounded_class().bounded for p in plants):
+        raise InputError("hysteresis_jump_change_bound needs bounded plants")
+    hi = max(hysteresis_slope_range(p)[1] for p in plants)
+    c = max(max(p.beta + p.gamma, p.beta - p.gamma) for p in plants)
+    total = hi * second + -math.expm1(-c * step) * jump
+    return float(min(2 * jump, total * (1 + 8 * np.finfo(float).eps)))
 
 
 def _slope_area(w: np.ndarray, hi: float, alpha: float, ca: float, cb: float) -> np.ndarray:
