@@ -91,6 +91,7 @@ def row(config, tuning, label: str, box, observer: str, search_limit: float) -> 
         reference=config.reference,
         disturbance=dist,
         iterations=6,
+        uddot_max=rc.details["uddot_max"],  # the report's second-difference envelope
     )
     if pr.proved:
         out["search"] = (

@@ -45,6 +45,27 @@ def test_a_rate_bound_growing_faster_than_the_envelope_has_no_fixed_point():
     assert all(s > e for e, s in r.steps)  # every certificate's rate bound beyond its envelope
 
 
+def test_with_a_second_difference_envelope_a_fixed_point_exists_close_by():
+    """paper_simulation_corrected's rate bound grows faster than its envelope with the jump
+    bounded by its largest slope (above); bounded where the input turns, it has a fixed
+    point a third above the stage's envelope, and the proving certificate states the
+    second-difference envelope as an assumption still."""
+    from bwdesign.design import second_envelope
+    from bwdesign.sim.falsify import falsify
+
+    cfg, loop = _loop("paper_simulation_corrected")
+    udot = cfg.envelope().udot_max
+    second = second_envelope(falsify(loop, NOMINAL, cfg.reference).input_accel_max)
+    r = prove_rate(
+        loop, uncertainty=NOMINAL, udot_max=udot, reference=cfg.reference, uddot_max=second
+    )
+    assert r.proved and udot < r.envelope < 1.5 * udot
+    rc = r.certificate
+    assert rc.details["uddot_max"] == second and rc.details["rate_proved"]
+    assert "(proved:" in rc.status and "second differences" in rc.status
+    assert "(assumed, not proved)" in rc.status
+
+
 def test_prove_rate_refuses_bad_iterations_and_says_when_it_gave_up():
     cfg, loop = _loop("stack_actuator_800hz")
     kw = dict(uncertainty=NOMINAL, udot_max=cfg.envelope().udot_max, reference=cfg.reference)
