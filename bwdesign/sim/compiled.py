@@ -197,6 +197,8 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
             out[i0 + j, 11] = -1.0
         for k in range(n):
             inw = win[k] != 0.0
+            # the input's last step is kept from the sample before the window on only
+            track = inw or win[k + 1] != 0.0
             live = 0
             for j in range(nl):
                 if not alive[j]:
@@ -256,7 +258,8 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 if inw:
                     A[j, 9] = max(A[j, 9], abs(du))
                     A[j, 11] = max(A[j, 11], abs(du - S[j, 11]))
-                S[j, 11] = du
+                if track:
+                    S[j, 11] = du
                 S[j, 0], S[j, 1], S[j, 2] = x1, x2, x3
                 S[j, 3], S[j, 4], S[j, 5], S[j, 6], S[j, 7] = h1, h2, h3, hd, hw
                 S[j, 8], S[j, 9], S[j, 10] = up, ua, q
