@@ -17,7 +17,9 @@ returns only a design whose robust certificate holds:
    (common Lyapunov function over every corner and both ends of the hysteresis
    jump-map slope, the model error as a bounded input).
 4. The certificate assumes the loop keeps ``|u'| <= udot_max`` (it bounds the
-   hysteresis through the input rate) and does not prove it. Each candidate is
+   hysteresis through the input rate) and a second-difference envelope
+   (:func:`second_envelope` of the corners', which bounds the jump where the input
+   turns), and does not prove them. Each candidate is
    therefore first simulated at every corner of the box
    (:func:`bwdesign.sim.simulate_corners`, started on the reference, three
    periods, statistics after the first): a diverging corner rejects it, and
@@ -256,10 +258,11 @@ def _corners(rq: _Request, c: dict[str, Any]) -> dict[str, Any]:
     loop = _loop(rq, c)
     res = simulate_corners(loop, rq.box, rq.reference, noise_max=rq.noise_max)
     if not res.stable.all():
-        return {"simulated_maxe": None, "simulated_udot_max": None}
+        return {"simulated_maxe": None, "simulated_udot_max": None, "simulated_uddot_max": None}
     return {
         "simulated_maxe": float(np.max(res.maxe)),
         "simulated_udot_max": float(np.max(res.input_rate_max)),
+        "simulated_uddot_max": float(np.max(res.input_accel_max)),
     }
 
 
@@ -300,6 +303,7 @@ def _assess(rq: _Request, c: dict[str, Any]) -> RobustCertificate | None:
         noise_max=rq.noise_max,
         interior_samples=rq.search.interior_samples,
         seed=rq.search.seed,
+        uddot_max=second_envelope(c["simulated_uddot_max"]),
     )
     iu = rq.params.input_unit
     c.update(
