@@ -372,12 +372,13 @@ def _certify(
     # the ellipsoid on the per-sample cover first (the exact one if that fails); the
     # peak-to-peak bounds of every cover, the smallest kept (_conclude), and with the
     # jump as a slow input too where its change is bounded (neither is smaller everywhere)
-    covers = _covers(st, reference, data, noise_max)
+    kept: dict[bool, Any] = {}
+    covers = _covers(st, reference, data, noise_max, kept)
     every = list(covers)
     if math.isfinite(change):
         slow = replace(st, jump_change=change)
         every += _covers(slow, reference, [_plant_data(slow, tp) for tp in vertices + interior],
-                         noise_max)  # fmt: skip
+                         noise_max, kept)  # fmt: skip
     for covered, dd in covers[::-1]:
         rc = _certify_with(st, dd, len(vertices), covered, a, noise_max, every)
         if rc.holds:
@@ -385,13 +386,14 @@ def _certify(
     return rc
 
 
-def _covers(st: _Setup, reference: Reference, data: list[dict], noise_max: float):
+def _covers(st: _Setup, reference: Reference, data: list[dict], noise_max: float, kept: dict):
     """The covers of the reference's terms (:mod:`.robust_cover`): exact where it applies,
-    and per sample; each with its own copy of the plants' data."""
+    and per sample; each with its own copy of the plants' data. ``kept``: the reference's
+    part, shared by the jump's two treatments (the same plants' rows)."""
     out = []
     for exact in (True, False):
         dd = [dict(d) for d in data]
-        covered = cover_inputs(st, reference, dd, noise_max, exact)
+        covered = cover_inputs(st, reference, dd, noise_max, exact, kept)
         if covered is not None:
             out.append((covered, dd))
     return out

@@ -33,25 +33,37 @@ __all__ = ["cover_inputs", "deterministic", "input_step_bound", "plant_peaks", "
 
 
 def cover_inputs(
-    st: Any, reference: Reference, data: list[dict[str, Any]], noise_max: float, exact: bool
+    st: Any,
+    reference: Reference,
+    data: list[dict[str, Any]],
+    noise_max: float,
+    exact: bool,
+    kept: dict[bool, Any] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]] | None:
     """The reference's terms at every time, per plant; the bound of every input channel.
 
     Sets ``chan``, ``static`` and ``step_ref`` in each plant's ``data``; returns the
     worst hysteresis bounds ``(x3, j, dh)``, the channel bounds ``W`` and their report.
     ``exact``: the reference's own response (:func:`.response.response_sups`; None when
-    it does not cover this reference), else its worst case at every sample.
+    it does not cover this reference), else its worst case at every sample. ``kept``:
+    the reference's part by ``exact``, computed on the first call that passes it and
+    read by the next (the plants' reference rows must be the same).
     """
     n, rhos = st.n, st.rhos
     dmax, dstep = st.dist[0], st.dist[1] * st.lp.dt  # |d|, |d_{k+1} - d_k|
-    det = deterministic(st, reference, data) if exact else None
+    kept = {} if kept is None else kept
+    if exact not in kept:
+        if exact:
+            kept[exact] = deterministic(st, reference, data)
+        else:
+            # sup over every t >= 0 of every reference row, all plants at once (refuses a
+            # reference it cannot cover: neither periodic nor settling, no stated structure)
+            sups = sup_abs(reference, st.lp.dt, np.vstack([d["rows"] for d in data]))
+            kept[exact] = np.split(sups, np.cumsum([len(d["rows"]) for d in data])[:-1])
+    det = kept[exact] if exact else None
+    sups = None if exact else kept[exact]
     if exact and det is None:
         return None
-    if det is None:
-        # sup over every t >= 0 of every reference row, all plants at once (refuses a
-        # reference it cannot cover: neither periodic nor settling, or no stated structure)
-        sups = sup_abs(reference, st.lp.dt, np.vstack([d["rows"] for d in data]))
-        sups = np.split(sups, np.cumsum([len(d["rows"]) for d in data])[:-1])
     half = (rhos[-1] - rhos[0]) / 2
     for i, d in enumerate(data):
         hv = d["hyst"][0]
