@@ -226,3 +226,52 @@ def test_the_jump_as_a_slow_input_where_the_loop_rejects_it(ref):
     if rc.details["jump_input"] == "slow":
         assert rc.details["jump_change_bound"] < 0.2 * rc.details["jump_bound"]
     assert ref.frequency != 20.0 or rc.details["jump_input"] == "slow"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("trial", range(12))
+def test_certificates_with_the_second_envelope_cover_what_the_falsifier_finds(trial):
+    """Seeded random references (sines, blended triangles, steps), boxes (up to +-3 % on a
+    random subset of the six parameters) and observers on the bundled stages: the
+    falsifier's worst steady errors stay below the certificate at the envelopes it
+    measured (first and second differences of the input), as in the report."""
+    from bwdesign import Step, load_config
+    from bwdesign.design import certified_envelope, second_envelope
+    from bwdesign.design.tuning import digital_tuning
+
+    rng = np.random.default_rng(100 + trial)
+    cfg = load_config(
+        ("paper_experiment", "paper_simulation_corrected", "stack_actuator_800hz")[trial % 3]
+    )
+    base = cfg.reference
+    A, f = abs(base.amplitude) * rng.uniform(0.3, 1.0), base.frequency * rng.uniform(0.3, 1.5)
+    kind = ("sine", "triangle", "step")[(trial // 3) % 3]
+    if kind == "sine":
+        ref = Sine(amplitude=A, offset=base.offset, frequency=f, phase=rng.uniform(0, 6.28))
+    elif kind == "triangle":
+        ref = Triangle(amplitude=A, offset=base.offset, frequency=f,
+                       corner_time=rng.uniform(0.02, 0.2) / f)  # fmt: skip
+    else:
+        ref = Step(amplitude=A, offset=base.offset, t_step=rng.uniform(0.1, 2.0) / f,
+                   rise_time=rng.uniform(0.05, 0.5) / f)  # fmt: skip
+    six = ["a1", "a2", "a3", "alpha", "beta", "gamma"]
+    rel = float(rng.choice([0.0, 0.01, 0.03]))
+    box = UncertaintyBox.from_dict({p: {"rel": rel} for p in six if rng.random() < 0.4 and rel})
+    observer = ("phso", "phdo")[trial % 2]
+    loop = ClosedLoop.from_config(
+        cfg, observer=observer, law=digital_tuning(cfg.plant, cfg.dt), saturate=False
+    )
+    found = falsify(loop, box, ref, interior=16, rounds=3, per_round=8, seed=trial)
+    assert found.stable
+    rc = certify_robust(
+        loop,
+        uncertainty=box,
+        udot_max=certified_envelope(cfg.envelope().udot_max, found.input_rate_max),
+        reference=ref,
+        uddot_max=second_envelope(found.input_accel_max),
+        interior_samples=8,
+    )
+    assert rc.holds, rc.status
+    assert found.worst_maxe <= rc.tracking_bound
+    assert found.worst_estimation_maxe[0] <= rc.estimation_bound
+    assert found.worst_estimation_maxe[2] <= rc.x3_estimation_bound
