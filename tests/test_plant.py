@@ -341,7 +341,8 @@ def test_hysteresis_jump_bound_refuses_bad_input():
 
 def test_hysteresis_jump_change_bound_holds_at_every_sample():
     """|j_(k+1) - j_k| <= hysteresis_jump_change_bound over random boxes and inputs whose
-    second differences are bounded, from the first sample on (no turn needed)."""
+    second differences are bounded, once the input has turned; and the bound is below
+    the sum of its two parts' largest values (it takes them where they occur)."""
     from itertools import product
 
     from bwdesign.model.plant import hysteresis_jump_bound, hysteresis_jump_change_bound
@@ -359,19 +360,45 @@ def test_hysteresis_jump_change_bound_holds_at_every_sample():
         corners = [c for c in corners if c.bounded_class().bounded]
         step = 10 ** rng.uniform(-3, 0)
         second = step * 10 ** rng.uniform(-3, -0.5)
-        # from any state: the jump's own bound without the turn (hi step)
-        jump = hysteresis_jump_bound(corners, step)
+        jump = hysteresis_jump_bound(corners, step, second)
         change = hysteresis_jump_change_bound(corners, step, second, jump)
-        assert 0 < change <= 2 * jump
+        hi = max(c.alpha + (c.beta - c.gamma) * c.bounded_class().h_max for c in corners)
+        c_max = max(max(c.beta + c.gamma, c.beta - c.gamma) for c in corners)
+        assert 0 < change <= min(2 * jump, hi * second + (1 - math.exp(-c_max * step)) * jump)
         for p in corners[:3]:
             hm = p.bounded_class().h_max
-            h, u, last = rng.uniform(-hm, hm), 0.0, None
+            h, u, last, prev, turned = rng.uniform(-hm, hm), 0.0, None, None, False
             for v in _turning_inputs(rng, step, second, 2000):
+                was = turned  # both jumps compared come after the input's first turn
+                turned = turned or (prev is not None and prev * v <= 0)
                 h1 = hysteresis_increment(p, h, u, u + v)
-                if last is not None:
+                if last is not None and was:
                     assert abs((h1 - h) - last) <= change * (1 + 1e-9) + 1e-15
                     worst_share = max(worst_share, abs((h1 - h) - last) / change)
-                h, u, last = h1, u + v, h1 - h
+                h, u, last, prev = h1, u + v, h1 - h, v
     assert worst_share > 0.3  # the bound is not vacuous on these inputs
+    # the input turning as fast as allowed after a long run at full speed comes close
+    exp, sim = preset("paper_experiment"), preset("paper_simulation_corrected")
+    # slow turns (the change's own part binds) and fast ones (the turn's hi second binds)
+    for p, step, second in ((exp, 0.08, 2.5e-4), (sim, 0.008, 6e-5), (exp, 0.08, 0.02)):
+        jump = hysteresis_jump_bound([p], step, second)
+        change = hysteresis_jump_change_bound([p], step, second, jump)
+        reached = 0.0
+        for v0 in np.linspace(-second, 0.0, 6):
+            steps = [-step] * int(50 / step) + list(np.arange(-step, v0, second))
+            steps += [min(step, v0 + m * second) for m in range(int(2 * step / second) + 5)]
+            reached = max(reached, _largest_change(p, steps, int(50 / step)))
+        assert 0.6 * change <= reached <= change
     with pytest.raises(InputError, match="bounded plants"):
         hysteresis_jump_change_bound([], 0.1, 1e-3, 0.01)
+
+
+def _largest_change(p, steps, skip):
+    """The largest ``|j_(k+1) - j_k|`` of ``p`` driven from 0 by the input ``steps``,
+    after the first ``skip`` of them."""
+    h, u, js = 0.0, 0.0, []
+    for v in steps:
+        h1 = hysteresis_increment(p, h, u, u + v)
+        js.append(h1 - h)
+        h, u = h1, u + v
+    return float(np.max(np.abs(np.diff(js[skip + 1 :]))))

@@ -11,8 +11,8 @@ channels grow with ``E``. :func:`prove_rate` looks for that point: it certifies 
 in ``E``: the hysteresis jumps and the slope interval grow with it), each step checked
 by the certificate itself. Measured on the nominal loops with the report's
 second-difference envelope (``reports/robust_bounds``): paper_experiment's rate is proved
-at 416.8 V/s with the same tracking bound as at its 396.9 V/s (0.0302 um),
-paper_simulation_corrected's at 540.4 V/s (0.0233 instead of 0.0196 um), the stack's at
+at 415.1 V/s with the same tracking bound as at its 396.9 V/s (0.0302 um),
+paper_simulation_corrected's at 537.9 V/s (0.0160 um, the same too), the stack's at
 6 661 V/s (0.0304 instead of 0.0152 um). Without that envelope: the stack at 6 710 V/s,
 paper_experiment at 1 069 V/s (0.385 um), paper_simulation_corrected not at all.
 """

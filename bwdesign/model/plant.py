@@ -222,32 +222,55 @@ def hysteresis_jump_bound(
     if second is None or not all(p.bounded_class().bounded for p in plants) or step == 0:
         return flat
     second = real(second, "second", within=POSITIVE)
-    alpha = min(p.alpha for p in plants)
-    cb = min(p.beta + p.gamma for p in plants)
-    ca = min(min(p.beta - p.gamma, p.beta + p.gamma) for p in plants)
+    _, _, area = _turns(plants, step, second)
+    return float(min(flat, float(np.max(area))))
+
+
+def _turns(
+    plants: list[BoucWenParams], step: float, second: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`hysteresis_jump_bound`'s grid: the steps ``v`` (``JUMP_GRID + 1`` points from
+    0 to ``step``), the least travel ``w_min`` before a step in each interval (at its
+    left end) and the bound of the jump over each interval, rounding added."""
+    hi = max(hysteresis_slope_range(p)[1] for p in plants)
+    slope = _Slope(
+        hi,
+        min(p.alpha for p in plants),
+        min(min(p.beta - p.gamma, p.beta + p.gamma) for p in plants),
+        min(p.beta + p.gamma for p in plants),
+    )
     v = np.linspace(0.0, step, JUMP_GRID + 1)
     m = np.maximum(np.ceil(v[:-1] / second) - 1.0, 0.0)  # positive terms of w_min
     w0 = np.maximum(m * v[:-1] - second * m * (m + 1) / 2, 0.0) * (1 - 1e-12)
-    area = _slope_area(w0 + v[1:], hi, alpha, ca, cb) - _slope_area(w0, hi, alpha, ca, cb)
+    area = slope.area(w0 + v[1:]) - slope.area(w0)
     # the two areas are below hi w + 2 alpha / cb; their rounding is added
-    total = float(np.max(area)) + 8 * np.finfo(float).eps * (flat + 2 * hi * float(w0.max()))
-    return float(min(flat, total))
+    area += 8 * np.finfo(float).eps * (hi * step + 2 * hi * float(w0.max()))
+    return v, w0, area
 
 
 def hysteresis_jump_change_bound(
     plants: list[BoucWenParams], step: float, second: float, jump: float
 ) -> float:
     """Bound of the change ``|j_{k+1} - j_k|`` of one sample's hysteresis jump from one
-    sample to the next, for any plant in ``plants`` (bounded class).
+    sample to the next, for any plant in ``plants`` (bounded class), once the input has
+    turned (as :func:`hysteresis_jump_bound`, whose ``second`` it shares).
 
     ``j_k = F(x3_k, du_k)`` with ``F(h, v) = H(h, v) - h`` (:func:`hysteresis_increment`)
     and ``x3_{k+1} = x3_k + j_k``, so ``j_{k+1} - j_k = [F(x3_{k+1}, du_{k+1}) -
-    F(x3_{k+1}, du_k)] + [F(x3_{k+1}, du_k) - F(x3_k, du_k)]``. The first part is at most
-    ``hi |du_{k+1} - du_k| <= hi second`` (the slope in ``u`` is in ``[0, hi]``, either side
-    of 0); in the second, ``H`` moves with its start by a factor in ``[exp(-c |v|), 1]``
-    (``c = max(beta + gamma, beta - gamma)``, the decay of the state's sensitivity along
-    the path), so it is at most ``(1 - exp(-c step)) |j_k|``, with ``|j_k| <= jump``
-    (:func:`hysteresis_jump_bound`). Never above ``2 jump``.
+    F(x3_{k+1}, du_k)] + [F(x3_{k+1}, du_k) - F(x3_k, du_k)]``:
+
+    - the second part: ``H`` moves with its start by a factor in ``[exp(-c |v|), 1]``
+      (``c = max(beta + gamma, beta - gamma)``, the decay of the state's sensitivity
+      along the path), so it is at most ``(1 - exp(-c |du_k|)) |j_k|``, and ``|j_k|`` is
+      at most the jump bound at that very step;
+    - the first part is the slope beyond ``du_k`` times ``|du_{k+1} - du_k| <= second``:
+      the path goes on from where step ``k`` left it, so that slope is at most
+      ``Psi(w_min(v) + v)`` (``v = |du_k|``); where ``v <= second`` the input may turn
+      and it is ``hi`` (the slope in ``u`` is in ``[0, hi]`` either side of 0).
+
+    The larger of the two summed, over the same grid as the jump bound, each interval
+    bounded from above; never above ``hi second + (1 - exp(-c step)) jump`` (``jump``:
+    :func:`hysteresis_jump_bound` over ``step``) nor ``2 jump``.
     """
     step = real(step, "step", within=NONNEGATIVE)
     second = real(second, "second", within=POSITIVE)
@@ -257,19 +280,57 @@ def hysteresis_jump_change_bound(
         raise InputError("hysteresis_jump_change_bound needs bounded plants")
     hi = max(hysteresis_slope_range(p)[1] for p in plants)
     c = max(max(p.beta + p.gamma, p.beta - p.gamma) for p in plants)
-    total = hi * second + -math.expm1(-c * step) * jump
-    return float(min(2 * jump, total * (1 + 8 * np.finfo(float).eps)))
+    total = (hi * second + -math.expm1(-c * step) * jump) * (1 + 8 * np.finfo(float).eps)
+    if step == 0:
+        return 0.0
+    v, w0, area = _turns(plants, step, second)
+    slope = _Slope(
+        hi,
+        min(p.alpha for p in plants),
+        min(min(p.beta - p.gamma, p.beta + p.gamma) for p in plants),
+        min(p.beta + p.gamma for p in plants),
+    )
+    beyond = np.where(v[:-1] < second, hi, slope.at(w0 + v[:-1]))
+    joint = second * beyond + -np.expm1(-c * v[1:]) * np.minimum(area, jump)
+    joint = float(np.max(joint)) * (1 + 8 * np.finfo(float).eps)
+    return float(min(2 * jump, total, joint))
 
 
-def _slope_area(w: np.ndarray, hi: float, alpha: float, ca: float, cb: float) -> np.ndarray:
-    """``int_0^w Psi`` of :func:`hysteresis_jump_bound` (``Psi(0) = hi``)."""
-    if hi <= alpha:  # decays at cb from the start
-        return hi * -np.expm1(-cb * w) / cb
-    if ca == 0.0:  # never falls to alpha
-        return hi * w
-    knee = math.log(hi / alpha) / ca  # where Psi reaches alpha
-    first = hi * -np.expm1(-ca * np.minimum(w, knee)) / ca
-    return first + alpha * -np.expm1(-cb * np.maximum(w - knee, 0.0)) / cb
+@dataclass(frozen=True)
+class _Slope:
+    """``Psi`` of :func:`hysteresis_jump_bound`: from ``hi``, decaying at ``ca`` above
+    ``alpha`` and at ``cb`` below, along the path length ``w``."""
+
+    hi: float
+    alpha: float
+    ca: float
+    cb: float
+
+    @property
+    def knee(self) -> float:
+        """Where ``Psi`` reaches ``alpha`` (0: at once; inf: never)."""
+        if self.hi <= self.alpha:
+            return 0.0
+        return math.log(self.hi / self.alpha) / self.ca if self.ca > 0 else math.inf
+
+    def at(self, w: np.ndarray) -> np.ndarray:
+        """``Psi(w)``."""
+        hi, alpha, ca, cb, knee = self.hi, self.alpha, self.ca, self.cb, self.knee
+        if knee == 0.0:  # decays at cb from the start
+            return hi * np.exp(-cb * w)
+        if knee == math.inf:  # never falls to alpha
+            return np.full_like(w, hi)
+        return np.where(w < knee, hi * np.exp(-ca * w), alpha * np.exp(-cb * (w - knee)))
+
+    def area(self, w: np.ndarray) -> np.ndarray:
+        """``int_0^w Psi``."""
+        hi, alpha, ca, cb, knee = self.hi, self.alpha, self.ca, self.cb, self.knee
+        if knee == 0.0:
+            return hi * -np.expm1(-cb * w) / cb
+        if knee == math.inf:
+            return hi * w
+        first = hi * -np.expm1(-ca * np.minimum(w, knee)) / ca
+        return first + alpha * -np.expm1(-cb * np.maximum(w - knee, 0.0)) / cb
 
 
 @dataclass(frozen=True)
