@@ -245,6 +245,23 @@ def test_hysteresis_slope_range_bounds_every_jump_and_is_attained():
     assert hysteresis_slope_range(q) == (0.5, 0.5)
 
 
+def _random_box(rng, rel):
+    """A random bounded plant's hysteresis (alpha, beta, gamma), the bounded corners of a
+    box of +-``rel`` around it, an input step bound and a second-difference bound."""
+    from itertools import product
+
+    beta = rng.uniform(0.05, 2.0)
+    nominal = dict(alpha=rng.uniform(0.1, 5.0), beta=beta, gamma=rng.uniform(-0.8, 0.8) * beta)
+    corners = [
+        BoucWenParams(a1=1e5, a2=500.0, a3=1e5,
+                      **{k: v * f for (k, v), f in zip(nominal.items(), fs, strict=True)})
+        for fs in product((1 - rel, 1 + rel), repeat=3)
+    ]  # fmt: skip
+    step = 10 ** rng.uniform(-3, 0)
+    second = step * 10 ** rng.uniform(-3, -0.5)
+    return nominal, [c for c in corners if c.bounded_class().bounded], step, second
+
+
 def _turning_inputs(rng, step, second, n):
     """Input steps ``v_k`` with ``|v_k| <= step`` and ``|v_k - v_(k-1)| <= second``: runs of
     random length at full, zero or random second difference (reversals of every speed)."""
@@ -267,18 +284,9 @@ def test_hysteresis_jump_bound_holds_once_the_input_turns_and_is_reached():
 
     rng = np.random.default_rng(5)
     for _ in range(12):
-        beta = rng.uniform(0.05, 2.0)
-        gamma = rng.uniform(-0.8, 0.8) * beta
-        nominal = dict(alpha=rng.uniform(0.1, 5.0), beta=beta, gamma=gamma)
-        corners = [
-            BoucWenParams(a1=1e5, a2=500.0, a3=1e5, **{k: v * f for (k, v), f in
-                                                      zip(nominal.items(), fs, strict=True)})
-            for fs in product((0.9, 1.1), repeat=3)
-        ]  # fmt: skip
-        corners = [c for c in corners if c.bounded_class().bounded]
+        nominal, corners, step, second = _random_box(rng, 0.1)
+        beta, gamma = nominal["beta"], nominal["gamma"]
         hi = max(hysteresis_slope_range(c)[1] for c in corners)
-        step = 10 ** rng.uniform(-3, 0)
-        second = step * 10 ** rng.uniform(-3, -0.5)
         bound = hysteresis_jump_bound(corners, step, second)
         assert bound <= hi * step and hysteresis_jump_bound(corners, step) == hi * step
         for _ in range(4):
@@ -343,23 +351,12 @@ def test_hysteresis_jump_change_bound_holds_at_every_sample():
     """|j_(k+1) - j_k| <= hysteresis_jump_change_bound over random boxes and inputs whose
     second differences are bounded, once the input has turned; and the bound is below
     the sum of its two parts' largest values (it takes them where they occur)."""
-    from itertools import product
-
     from bwdesign.model.plant import hysteresis_jump_bound, hysteresis_jump_change_bound
 
     rng = np.random.default_rng(11)
     worst_share = 0.0
     for _ in range(10):
-        beta = rng.uniform(0.05, 2.0)
-        nominal = dict(alpha=rng.uniform(0.1, 5.0), beta=beta, gamma=rng.uniform(-0.8, 0.8) * beta)
-        corners = [
-            BoucWenParams(a1=1e5, a2=500.0, a3=1e5, **{k: v * f for (k, v), f in
-                                                      zip(nominal.items(), fs, strict=True)})
-            for fs in product((0.95, 1.05), repeat=3)
-        ]  # fmt: skip
-        corners = [c for c in corners if c.bounded_class().bounded]
-        step = 10 ** rng.uniform(-3, 0)
-        second = step * 10 ** rng.uniform(-3, -0.5)
+        _, corners, step, second = _random_box(rng, 0.05)
         jump = hysteresis_jump_bound(corners, step, second)
         change = hysteresis_jump_change_bound(corners, step, second, jump)
         hi = max(c.alpha + (c.beta - c.gamma) * c.bounded_class().h_max for c in corners)
