@@ -222,16 +222,16 @@ def hysteresis_jump_bound(
     if second is None or not all(p.bounded_class().bounded for p in plants) or step == 0:
         return flat
     second = real(second, "second", within=POSITIVE)
-    _, _, area = _turns(plants, step, second)
+    _, _, area, _ = _turns(plants, step, second)
     return float(min(flat, float(np.max(area))))
 
 
 def _turns(
     plants: list[BoucWenParams], step: float, second: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, _Slope]:
     """:func:`hysteresis_jump_bound`'s grid: the steps ``v`` (``JUMP_GRID + 1`` points from
     0 to ``step``), the least travel ``w_min`` before a step in each interval (at its
-    left end) and the bound of the jump over each interval, rounding added."""
+    left end), the bound of the jump over each interval (rounding added) and ``Psi``."""
     hi = max(hysteresis_slope_range(p)[1] for p in plants)
     slope = _Slope(
         hi,
@@ -245,7 +245,7 @@ def _turns(
     area = slope.area(w0 + v[1:]) - slope.area(w0)
     # the two areas are below hi w + 2 alpha / cb; their rounding is added
     area += 8 * np.finfo(float).eps * (hi * step + 2 * hi * float(w0.max()))
-    return v, w0, area
+    return v, w0, area, slope
 
 
 def hysteresis_jump_change_bound(
@@ -283,13 +283,7 @@ def hysteresis_jump_change_bound(
     total = (hi * second + -math.expm1(-c * step) * jump) * (1 + 8 * np.finfo(float).eps)
     if step == 0:
         return 0.0
-    v, w0, area = _turns(plants, step, second)
-    slope = _Slope(
-        hi,
-        min(p.alpha for p in plants),
-        min(min(p.beta - p.gamma, p.beta + p.gamma) for p in plants),
-        min(p.beta + p.gamma for p in plants),
-    )
+    v, w0, area, slope = _turns(plants, step, second)
     beyond = np.where(v[:-1] < second, hi, slope.at(w0 + v[:-1]))
     joint = second * beyond + -np.expm1(-c * v[1:]) * np.minimum(area, jump)
     joint = float(np.max(joint)) * (1 + 8 * np.finfo(float).eps)
