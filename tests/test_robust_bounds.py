@@ -275,3 +275,35 @@ def test_certificates_with_the_second_envelope_cover_what_the_falsifier_finds(tr
     assert found.worst_maxe <= rc.tracking_bound
     assert found.worst_estimation_maxe[0] <= rc.estimation_bound
     assert found.worst_estimation_maxe[2] <= rc.x3_estimation_bound
+
+
+def test_the_study_keeps_a_proof_of_the_rate_found_close_by():
+    """paper_experiment's nominal loop bounds its own input rate within 5 % of the envelope
+    it assumed: the study asks once more at that bound, where the certificate proves it
+    with the same tracking bound, and keeps that; paper_simulation_corrected's bound is
+    34 % above its envelope and its certificate stays where it was, the rate assumed."""
+    from bwdesign import load_config
+    from bwdesign.design.tuning import digital_tuning
+    from bwdesign.study.robust import PROVE_NEARBY, robust_loop
+
+    nominal = UncertaintyBox.from_dict({})
+    for stage, proved in (("paper_experiment", True), ("paper_simulation_corrected", False)):
+        cfg = load_config(stage)
+        udot = cfg.envelope().udot_max
+        rl = robust_loop(cfg, digital_tuning(cfg.plant, cfg.dt), udot, "phso", nominal)
+        rc, d = rl.certificate, rl.certificate.details
+        assert rc.holds and d["rate_proved"] is proved
+        at_corners = certify_robust(
+            ClosedLoop.from_config(cfg, observer="phso", law=digital_tuning(cfg.plant, cfg.dt),
+                                   saturate=False),
+            uncertainty=nominal, udot_max=udot, reference=cfg.reference,
+            uddot_max=d["uddot_max"],
+        )  # fmt: skip
+        if proved:
+            assert at_corners.details["rate_margin"] >= PROVE_NEARBY
+            assert rl.envelope > udot and d["udot_max"] == rl.envelope
+            assert rc.tracking_bound <= 1.01 * at_corners.tracking_bound
+            assert "(proved:" in rc.status and "(assumed, not proved)" in rc.status
+        else:
+            assert at_corners.details["rate_margin"] < PROVE_NEARBY
+            assert rl.envelope == udot and rc.tracking_bound == at_corners.tracking_bound

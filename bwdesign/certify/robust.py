@@ -639,7 +639,7 @@ def _rate_clause(step: float, st: _Setup, dt: float, unit: str) -> str:
         out = (
             f"and the loop's input keeps |u'| <= {udot_max:.4g} {unit}/s (proved: the "
             f"certificate bounds it by {step / dt:.4g} {unit}/s in steady state, a margin of "
-            f"{udot_max * dt / step:.3g}x)"
+            f"{udot_max * dt / step:.4g}x)"
         )
     else:
         out = (

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+from ..design.robust import certified_envelope
 from ..study import Study
 from .document import Document
 
@@ -62,14 +63,20 @@ def robust_section(doc: Document, study: Study) -> None:
     for lp in loops:
         rc = lp.certificate
         name = _OBSERVERS[lp.observer]
-        raised = lp.envelope > udot_max
+        corners = certified_envelope(udot_max, lp.simulated_input_rate_max)
+        raised = corners > udot_max
         doc.para(
             f"{name}: the input reaches {lp.simulated_input_rate_max:.4g} {iu}/s"
             + (
-                f", above the stage's envelope: certified for |u'| <= {lp.envelope:.4g} "
-                f"{iu}/s instead"
+                f", above the stage's envelope: certified for |u'| <= {corners:.4g} {iu}/s instead"
                 if raised
                 else f", within the stage's envelope |u'| <= {udot_max:.4g} {iu}/s"
+            )
+            + (
+                f"; certified at |u'| <= {lp.envelope:.4g} {iu}/s, where the certificate's "
+                "own rate bound proves the envelope"
+                if lp.envelope > corners
+                else ""
             )
             + ". Verdict: "
             + rc.status
