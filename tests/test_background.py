@@ -78,7 +78,7 @@ def test_study_with_two_workers_is_the_same_study():
             C._COMPUTE[part] = lambda r, f=f, part=part: (computed.append(part), f(r))[1]
         cfg = load_config("configs/paper_simulation_corrected.toml")
         from bwdesign.study.result import CERTIFICATE_PARTS
-        parts = CERTIFICATE_PARTS
+        parts = CERTIFICATE_PARTS | {"tier_synthesis"}
         one = C.study(cfg, parts=parts)
         here = list(computed)
         computed.clear()
@@ -88,8 +88,8 @@ def test_study_with_two_workers_is_the_same_study():
         """
     )
     assert got["same"]
-    assert got["one"] == ["configured", "synthesis"]
-    assert got["two"] == []  # both computed by the second process
+    assert got["one"] == ["tier_synthesis"]
+    assert got["two"] == []  # computed by the second process
 
 
 def test_workers_checked():

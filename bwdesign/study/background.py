@@ -1,8 +1,9 @@
 """Work done beside the main process: a forked child computes a list of tasks meanwhile.
 
-The report's slow parts that do not depend on each other (the certificates and the
-per-tier synthesis beside the tracking runs and the loop analyses; half the figures
-beside the other half) run on a second core: :class:`Background` forks a child that
+The report's slow parts that do not depend on each other (the per-tier synthesis and
+the robust section beside the tuning, the certificates, the tracking runs and the loop
+analyses: :data:`bwdesign.study.compute.BESIDE`; half the figures beside the other half)
+run on a second core: :class:`Background` forks a child that
 runs its tasks in order and sends each result back (pickled) as soon as it has it,
 while this process goes on with its own work and asks for a result when it needs it.
 
