@@ -187,14 +187,12 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
     for i0 in range(0, N, _LANES):
         nl = min(_LANES, N - i0)
         for j in range(nl):
-            S[j, 0], S[j, 1], S[j, 2] = start[0], start[1], start[2]
-            S[j, 3], S[j, 4], S[j, 5] = start[3], start[4], start[5]
+            S[j, 0:6] = start[0:6]  # x1, x2, x3, xhat1, xhat2, xhat3
             S[j, 6], S[j, 7] = 0.0, start[5]
             S[j, 8], S[j, 9], S[j, 10], S[j, 11] = start[6], start[6], 0.0, 0.0
             A[j, :] = 0.0
             alive[j] = True
-            out[i0 + j, 10] = 1.0
-            out[i0 + j, 11] = -1.0
+            out[i0 + j, 10], out[i0 + j, 11] = 1.0, -1.0  # alive, no divergence step
         for k in range(n):
             inw = win[k] != 0.0
             # the input's last step is kept from the sample before the window on only
