@@ -278,13 +278,12 @@ def hysteresis_jump_change_bound(
     plants = list(plants)
     if not plants or not all(p.bounded_class().bounded for p in plants):
         raise InputError("hysteresis_jump_change_bound needs bounded plants")
-    hi = max(hysteresis_slope_range(p)[1] for p in plants)
-    c = max(max(p.beta + p.gamma, p.beta - p.gamma) for p in plants)
-    total = (hi * second + -math.expm1(-c * step) * jump) * (1 + 8 * np.finfo(float).eps)
     if step == 0:
         return 0.0
     v, w0, area, slope = _turns(plants, step, second)
-    beyond = np.where(v[:-1] < second, hi, slope.at(w0 + v[:-1]))
+    c = max(max(p.beta + p.gamma, p.beta - p.gamma) for p in plants)
+    total = (slope.hi * second + -math.expm1(-c * step) * jump) * (1 + 8 * np.finfo(float).eps)
+    beyond = np.where(v[:-1] < second, slope.hi, slope.at(w0 + v[:-1]))
     joint = second * beyond + -np.expm1(-c * v[1:]) * np.minimum(area, jump)
     joint = float(np.max(joint)) * (1 + 8 * np.finfo(float).eps)
     return float(min(2 * jump, total, joint))
