@@ -122,6 +122,34 @@ def test_the_falsifier_searches_past_the_corners_and_stays_below_the_bound(certi
         falsify(_loop(preset("paper_experiment")), box, REF, rounds=-1)
 
 
+def test_noise_aimed_at_the_largest_errors_beats_random_signs_and_stays_below_the_bound():
+    """With noise_max the falsifier aims the noise (module doc, step 4): on the stack's
+    nominal loop it finds a larger error than any random-sign run, and the certificate with
+    the same noise bound stays above it."""
+    from bwdesign import load_config
+    from bwdesign.design import certified_envelope, second_envelope
+    from bwdesign.design.tuning import digital_tuning
+    from bwdesign.sim.corners import simulate_corners
+
+    cfg = load_config("configs/stack_actuator_800hz.toml")
+    loop = ClosedLoop.from_config(
+        cfg, observer="phso", law=digital_tuning(cfg.plant, cfg.dt), saturate=False
+    )
+    box, ref, nmax = UncertaintyBox.from_dict({}), cfg.reference, 0.01
+    found = falsify(loop, box, ref, noise_max=nmax)
+    signs = simulate_corners(loop, box, ref, noise_max=nmax)
+    assert found.found_by == "noise" and found.plants == 1 + 4
+    assert found.worst_maxe > 1.3 * float(np.max(signs.maxe))
+    env = certified_envelope(cfg.envelope().udot_max, found.input_rate_max)
+    rc = certify_robust(
+        loop, uncertainty=box, udot_max=env, reference=ref, noise_max=nmax,
+        uddot_max=second_envelope(found.input_accel_max),
+    )  # fmt: skip
+    assert rc.holds and found.worst_maxe <= rc.tracking_bound
+    quiet = falsify(loop, box, ref)
+    assert quiet.found_by == "corner" and quiet.plants == 1  # no noise, nothing to aim
+
+
 def test_a_second_difference_envelope_bounds_the_jump_where_the_input_turns():
     """certify_robust(uddot_max=): the plant's jump bounded by hysteresis_jump_bound, a
     smaller certified bound that still covers every case the falsifier finds (whose
@@ -232,7 +260,8 @@ def test_the_jump_as_a_slow_input_where_the_loop_rejects_it(ref):
 @pytest.mark.parametrize("trial", range(12))
 def test_certificates_with_the_second_envelope_cover_what_the_falsifier_finds(trial):
     """Seeded random references (sines, blended triangles, steps), boxes (up to +-3 % on a
-    random subset of the six parameters) and observers on the bundled stages: the
+    random subset of the six parameters), observers and sensor noise bounds (the noise
+    aimed at the worst errors) on the bundled stages: the
     falsifier's worst steady errors stay below the certificate at the envelopes it
     measured (first and second differences of the input), as in the report."""
     from bwdesign import Step, load_config
@@ -258,10 +287,12 @@ def test_certificates_with_the_second_envelope_cover_what_the_falsifier_finds(tr
     rel = float(rng.choice([0.0, 0.01, 0.03]))
     box = UncertaintyBox.from_dict({p: {"rel": rel} for p in six if rng.random() < 0.4 and rel})
     observer = ("phso", "phdo")[trial % 2]
+    nmax = float(rng.choice([0.0, 0.005, 0.01]))  # sensor noise bound (um), aimed noise
     loop = ClosedLoop.from_config(
         cfg, observer=observer, law=digital_tuning(cfg.plant, cfg.dt), saturate=False
     )
-    found = falsify(loop, box, ref, interior=16, rounds=3, per_round=8, seed=trial)
+    found = falsify(loop, box, ref, interior=16, rounds=3, per_round=8, seed=trial,
+                    noise_max=nmax)  # fmt: skip
     assert found.stable
     rc = certify_robust(
         loop,
@@ -270,6 +301,7 @@ def test_certificates_with_the_second_envelope_cover_what_the_falsifier_finds(tr
         reference=ref,
         uddot_max=second_envelope(found.input_accel_max),
         interior_samples=8,
+        noise_max=nmax,
     )
     assert rc.holds, rc.status
     assert found.worst_maxe <= rc.tracking_bound

@@ -684,6 +684,40 @@ def test_bounded_noise_is_at_its_bound_and_the_batch_matches_simulate(tune, obse
         simulate_batch(loop, ref, tps, duration=0.5, noise_kind="uniform")
 
 
+@pytest.mark.parametrize("observer", ["phdo", "baseline"])
+def test_a_noise_pattern_is_the_noise_and_the_batch_matches_simulate(tune, observer):
+    """noise_kind as a pattern: noise_std times the given values, sample by sample (the
+    falsifier's aimed noise); one row per scenario in the batch, equal to simulate's to the
+    bit; a pattern outside [-1, 1], of the wrong length or not finite is refused."""
+    from bwdesign import tune_baseline
+
+    tps, _ = _mismatched(2, seed=5)
+    ref = Sine(amplitude=60, offset=80, frequency=2)
+    if observer == "baseline":
+        loop = ClosedLoop(P, None, tune_baseline(P, DT), dt=DT)
+    else:
+        ctl = DiscreteTrackingController(
+            P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
+        )
+        loop = _loop(ctl, observer, tune.gains)
+    n = int(round(0.5 / DT))
+    rows = np.random.default_rng(8).uniform(-1, 1, (2, n))
+    b = simulate_batch(loop, ref, tps, duration=0.5, noise_std=0.03, noise_kind=rows)
+    assert b.settings["noise_kind"] == "pattern"
+    for i, tp in enumerate(tps):
+        r = simulate(loop, ref, true_params=tp, duration=0.5, noise_std=0.03, noise_kind=rows[i])
+        assert np.allclose(np.asarray(r.z) - np.asarray(r.x)[:, 0], 0.03 * rows[i], atol=1e-12)
+        assert r.settings["noise_kind"] == "pattern"
+        assert [float(b.maxe[i]), float(b.rmse[i])] == [r.metrics.maxe, r.metrics.rmse]
+    one = simulate_batch(loop, ref, tps, duration=0.5, noise_std=0.03, noise_kind=rows[0])
+    assert one.maxe[0] == b.maxe[0]  # one row for every scenario
+    for bad in (1.5 * rows[0], rows[0][:-1], np.where(rows[0] > 0.9, np.nan, rows[0])):
+        with pytest.raises(InputError, match="noise_kind"):
+            simulate(loop, ref, duration=0.5, noise_std=0.03, noise_kind=bad)
+    with pytest.raises(InputError, match="noise_kind"):
+        simulate_batch(loop, ref, tps, duration=0.5, noise_std=0.03, noise_kind=rows[:, :-1])
+
+
 def test_corners_with_noise_at_the_bound_move_the_input_faster(tune):
     """A certificate with |n| <= noise_max must face the input rate that noise causes:
     simulate_corners(noise_max=...) runs it (bounded noise), the design's envelope reads it."""

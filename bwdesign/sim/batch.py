@@ -41,7 +41,7 @@ from ..observers.spec import GAIN_KINDS
 from . import kernel_process
 from .closed_loop import baseline_feedforward
 from .kernel import SCALAR, LoopConstants, discrete_observer_gains, hysteresis_increment_batch
-from .run import Run, disturbance_samples, diverged, prepare, resolve_window
+from .run import Run, disturbance_samples, diverged, kind_label, prepare, resolve_window
 from .run import noise_kind as check_noise_kind
 from .zoh import true_matrices
 
@@ -124,7 +124,7 @@ def simulate_batch(
     seeds: Any = 0,
     window: Any = None,
     input_disturbance: Any = None,
-    noise_kind: str = "gaussian",
+    noise_kind: Any = "gaussian",
 ) -> BatchResult:
     """Run the sampled loop ``loop`` for every true parameter set in ``true_params``.
 
@@ -149,8 +149,10 @@ def simulate_batch(
     input_disturbance : callable or array_like, optional
         The plant's input disturbance, as for :func:`simulate`: common to every
         scenario (``n`` samples) or one row per scenario (shape ``(N, n)``).
-    noise_kind : {"gaussian", "bounded"}
-        As for :func:`simulate` (:data:`bwdesign.sim.run.NOISE_KINDS`).
+    noise_kind : {"gaussian", "bounded"} or array_like, shape (N, n) or (n,)
+        As for :func:`simulate` (:data:`bwdesign.sim.run.NOISE_KINDS`); a pattern is one
+        row per scenario (or one row for all), scenario ``i``'s noise ``noise_std[i]``
+        times its row.
 
     Returns
     -------
@@ -171,7 +173,7 @@ def simulate_batch(
     seeds = np.broadcast_to(np.asarray(seeds), (N,))
     if seeds.dtype.kind not in "iu" or np.any(seeds < 0):
         raise InputError("seeds must be integers >= 0")
-    noise = (noise_std, seeds, check_noise_kind(noise_kind))
+    noise = (noise_std, seeds, check_noise_kind(noise_kind, (N, run.n)))
     t = run.t
     win = resolve_window(t, reference, window)
     in_win = (t >= win[0] - 1e-12) & (t <= win[1] + 1e-12)
@@ -195,8 +197,8 @@ def simulate_batch(
         "xhat0": list(run.start.xhat0),
         "u_prev": run.start.u_prev,
     }
-    if noise[2] != "gaussian":
-        settings["noise_kind"] = noise[2]
+    if kind_label(noise[2]) != "gaussian":
+        settings["noise_kind"] = kind_label(noise[2])
     return BatchResult(
         stable=stable,
         status=tuple(acc["status"]),
@@ -231,7 +233,8 @@ def _chunks(run: Run, noise: tuple, dist):
     :func:`~.run.sensor_noise` of ``noise_std[i]`` and ``seeds[i]``, as :func:`simulate`
     draws it; ``dist`` rows are scenarios (none, or one per scenario). The chunk's noise
     is given as what draws it, ``(seeds, std, bounded)`` (:func:`.compiled.noise_rows`):
-    the runner draws it where it runs (:mod:`.kernel_process`), no array is sent.
+    the runner draws it where it runs (:mod:`.kernel_process`), no array is sent; a
+    pattern's noise is sent as the array it is.
     """
     noise_std, seeds, kind = noise
     n, N = run.n, noise_std.size
@@ -240,7 +243,9 @@ def _chunks(run: Run, noise: tuple, dist):
     for lo in range(0, N, step):
         hi = min(N, lo + step)
         drawn = None
-        if noisy:
+        if noisy and not isinstance(kind, str):  # a pattern, scaled row by row
+            drawn = np.ascontiguousarray(noise_std[lo:hi, None] * kind[lo:hi])
+        elif noisy:
             std = np.ascontiguousarray(noise_std[lo:hi], dtype=float)
             drawn = ([int(v) for v in seeds[lo:hi]], std, kind != "gaussian")
         d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(dist[:, lo:hi].T)

@@ -32,7 +32,7 @@ from .kernel import (
     correct,
 )
 from .result import SimulationResult
-from .run import Run, disturbance_samples, diverged, finish, prepare, sensor_noise
+from .run import Run, disturbance_samples, diverged, finish, kind_label, prepare, sensor_noise
 from .run import noise_kind as check_noise_kind
 
 __all__ = ["simulate", "make_observer", "NOISE_STD"]
@@ -140,7 +140,7 @@ def simulate(
     window: Any = None,
     fast: bool = True,
     input_disturbance: Any = None,
-    noise_kind: str = "gaussian",
+    noise_kind: Any = "gaussian",
 ) -> SimulationResult:
     """Simulate the sampled-data tracking loop ``loop`` (see :mod:`bwdesign.sim`).
 
@@ -172,9 +172,10 @@ def simulate(
         a3 (u + d)``; the hysteresis, the observer and the law see ``u`` only), held
         over each sample: ``d(t)`` called with the sample times, or the ``n`` samples
         (input unit). See :class:`~bwdesign.DisturbanceBound`.
-    noise_kind : {"gaussian", "bounded"}
+    noise_kind : {"gaussian", "bounded"} or array_like, shape (n,)
         The noise's kind (:data:`bwdesign.sim.run.NOISE_KINDS`): Gaussian, or
-        ``+-noise_std`` with a random sign at every sample (a bounded noise at its bound).
+        ``+-noise_std`` with a random sign at every sample (a bounded noise at its bound),
+        or a pattern: ``n`` values in [-1, 1], the noise ``noise_std`` times them.
 
     Returns
     -------
@@ -201,9 +202,10 @@ def simulate(
     run = prepare(loop, reference, duration=duration, true_params=true_params)
     noise_std = real(noise_std, "noise_std", within=NOISE_STD)
     seed = integer(seed, "seed", within=SEED)
-    noise = sensor_noise(noise_std, seed, run.n, check_noise_kind(noise_kind))
+    noise_kind = check_noise_kind(noise_kind, (run.n,))
+    noise = sensor_noise(noise_std, seed, run.n, noise_kind)
     if run.loop.baseline:
-        drawn = (noise, noise_std, seed, noise_kind)
+        drawn = (noise, noise_std, seed, kind_label(noise_kind))
         return _simulate_baseline(run, drawn, window, input_disturbance, true_params)
     loop = _ukf_envelope(run.loop, reference)
     start = run.start
@@ -230,8 +232,8 @@ def simulate(
     rec["t"], rec["x_d"] = run.t[:m], ref[0][:m]
     settings = _settings(run, loop, obs, ctrl, noise_std, seed, true_params is not None)
     settings["path"] = path
-    if noise_kind != "gaussian":
-        settings["noise_kind"] = noise_kind
+    if kind_label(noise_kind) != "gaussian":
+        settings["noise_kind"] = kind_label(noise_kind)
     if dist is not None:
         settings["input_disturbance_max"] = float(np.max(np.abs(dist)))
     return finish(run, rec, window=window, mode="sampled", settings=settings)

@@ -385,10 +385,13 @@ def noise_rows(seeds, std, bounded, rows):
 
 
 def _drawn_noise(drawn, n):
-    """The ``(N, n)`` noise ``(seeds, std, bounded)`` describes (:func:`noise_rows`), or the
-    ``(1, 1)`` placeholder of a run without noise (``None``)."""
+    """The ``(N, n)`` noise ``(seeds, std, bounded)`` describes (:func:`noise_rows`), the
+    noise itself when given as an array, or the ``(1, 1)`` placeholder of a run without
+    noise (``None``)."""
     if drawn is None:
         return np.zeros((1, 1))
+    if isinstance(drawn, np.ndarray):
+        return drawn
     seeds, std, bounded = drawn
     rows = np.empty((len(seeds), n))
     noise_rows(seeds, std, bounded, rows)

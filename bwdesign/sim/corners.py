@@ -11,7 +11,7 @@ from ..model.references import Reference
 from ..model.uncertainty import DisturbanceBound, UncertaintyBox
 from .batch import BatchResult, simulate_batch
 
-__all__ = ["simulate_corners", "simulate_plants", "disturbance_signals"]
+__all__ = ["simulate_corners", "simulate_plants", "disturbance_signals", "span"]
 
 
 def disturbance_signals(bound: DisturbanceBound, t: np.ndarray) -> np.ndarray:
@@ -53,29 +53,44 @@ def simulate_corners(
     return simulate_plants(loop, box.vertices(loop.model), reference, disturbance, noise_max)
 
 
+def span(reference: Reference) -> tuple[float, tuple[float, float] | None]:
+    """The run length (s) and metrics window (``None``: the default) of
+    :func:`simulate_corners` for ``reference``."""
+    if reference.period is not None:
+        return max(3 * reference.period, 0.5), None
+    settles = max(reference.settles_at or 0.0, 0.0)
+    duration = max(settles + 1.0, 1.0)
+    moves = [float(b) for b in reference.breakpoints(0.0, settles)]
+    return duration, ((min(moves, default=0.0), duration) if settles > 0 else None)
+
+
 def simulate_plants(
     loop: ClosedLoop,
     plants: list,
     reference: Reference,
     disturbance: DisturbanceBound | None = None,
     noise_max: float = 0.0,
+    pattern: Any = None,
 ) -> BatchResult:
     """:func:`simulate_corners` for any list of plants (duration, window, disturbance
-    scenarios as there: ``len(plants) x`` the disturbance's signals, plant-major)."""
-    if reference.period is not None:
-        duration, window = max(3 * reference.period, 0.5), None
-    else:
-        settles = max(reference.settles_at or 0.0, 0.0)
-        duration = max(settles + 1.0, 1.0)
-        moves = [float(b) for b in reference.breakpoints(0.0, settles)]
-        window = (min(moves, default=0.0), duration) if settles > 0 else None
+    scenarios as there: ``len(plants) x`` the disturbance's signals, plant-major).
+
+    ``pattern``: the noise of each plant (one row per plant, values in [-1, 1], times
+    ``noise_max``: :data:`~bwdesign.sim.run.NOISE_KINDS`) instead of the random signs.
+    """
+    duration, window = span(reference)
     corners = list(plants)
     dist: Any = None
+    k = 1
     if disturbance is not None and not disturbance.none:
         t = np.arange(int(round(duration / loop.dt))) * loop.dt
         sig = disturbance_signals(disturbance, t)
+        k = len(sig)
         corners = [tp for tp in corners for _ in sig]
-        dist = np.tile(sig, (len(corners) // len(sig), 1))
+        dist = np.tile(sig, (len(corners) // k, 1))
+    kind: Any = "bounded" if noise_max > 0 else "gaussian"  # none: nothing to label
+    if pattern is not None:
+        kind = np.repeat(np.atleast_2d(np.asarray(pattern, dtype=float)), k, axis=0)
     return simulate_batch(
         loop,
         reference,
@@ -85,5 +100,5 @@ def simulate_plants(
         input_disturbance=dist,
         noise_std=noise_max,
         seeds=np.arange(len(corners)),
-        noise_kind="bounded" if noise_max > 0 else "gaussian",  # none: nothing to label
+        noise_kind=kind,
     )

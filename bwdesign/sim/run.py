@@ -35,6 +35,7 @@ __all__ = [
     "disturbance_samples",
     "sensor_noise",
     "noise_kind",
+    "kind_label",
     "NOISE_KINDS",
     "DURATION",
 ]
@@ -44,22 +45,53 @@ DURATION = Range(0.0, 1e7, lo_open=True, unit="s")
 #: The sensor noise of a run: ``"gaussian"``, ``noise_std`` times a standard normal per
 #: sample; ``"bounded"``, ``+-noise_std`` with the sign of that normal (white, and at the
 #: bound ``|n| <= noise_std`` of a certificate at every sample: what a certificate's
-#: envelope and its falsifier must face).
+#: envelope and its falsifier must face). A kind may also be a *pattern*: an array of
+#: values in [-1, 1], one per sample, and the noise is ``noise_std`` times it (a given
+#: sequence within the bound, such as the falsifier's aimed noise,
+#: :func:`bwdesign.sim.falsify.falsify`); its settings say ``"pattern"``.
 NOISE_KINDS = ("gaussian", "bounded")
 
 
-def noise_kind(kind: Any) -> str:
-    """``kind`` checked against :data:`NOISE_KINDS` (``InputError`` otherwise)."""
-    if kind not in NOISE_KINDS:
+def noise_kind(kind: Any, shape: tuple[int, ...] | None = None) -> str | np.ndarray:
+    """``kind`` checked: one of :data:`NOISE_KINDS`, or a pattern (``InputError`` otherwise).
+
+    A pattern is returned as a read-only float array broadcast to ``shape`` (the run's
+    samples, or scenarios by samples), each value finite and within [-1, 1].
+    """
+    if isinstance(kind, str):
+        if kind not in NOISE_KINDS:
+            raise InputError(f"noise_kind must be one of {', '.join(NOISE_KINDS)}, got {kind!r}")
+        return kind
+    if shape is None:
         raise InputError(f"noise_kind must be one of {', '.join(NOISE_KINDS)}, got {kind!r}")
-    return str(kind)
+    try:
+        a = np.broadcast_to(np.asarray(kind, dtype=float), shape).copy()
+    except (TypeError, ValueError):
+        raise InputError(
+            f"noise_kind must be one of {', '.join(NOISE_KINDS)} or a pattern of shape "
+            f"{shape} (values in [-1, 1])"
+        ) from None
+    if not np.all(np.isfinite(a)) or np.any(np.abs(a) > 1):
+        raise InputError("a noise_kind pattern must hold finite values within [-1, 1]")
+    a.setflags(write=False)
+    return a
 
 
-def sensor_noise(noise_std: float, seed: int, n: int, kind: str = "gaussian") -> np.ndarray:
+def kind_label(kind: str | np.ndarray) -> str:
+    """The name a run's settings give its noise kind (``"pattern"`` for a pattern)."""
+    return kind if isinstance(kind, str) else "pattern"
+
+
+def sensor_noise(
+    noise_std: float, seed: int, n: int, kind: str | np.ndarray = "gaussian"
+) -> np.ndarray:
     """The ``n`` noise samples of a run (:data:`NOISE_KINDS`), from
-    ``numpy.random.default_rng(seed)``; zeros for ``noise_std = 0``."""
+    ``numpy.random.default_rng(seed)``, or ``noise_std`` times a pattern; zeros for
+    ``noise_std = 0``."""
     if noise_std <= 0:
         return np.zeros(n)
+    if not isinstance(kind, str):
+        return noise_std * np.asarray(kind, dtype=float)
     z = np.random.default_rng(seed).standard_normal(n)
     return noise_std * (z if kind == "gaussian" else np.sign(z))
 
