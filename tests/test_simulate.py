@@ -81,6 +81,39 @@ def test_fast_path_equals_generic_path(experiment):
             np.testing.assert_allclose(a.xhat, b.xhat, rtol=0, atol=1e-9)
 
 
+@pytest.mark.parametrize("observer", ["phso", "eso", "phdo"])
+def test_the_compiled_step_is_the_python_step_to_the_bit(experiment, monkeypatch, observer):
+    """The fast path runs the compiled step; the Python-float step of bwdesign.sim.kernel
+    gives the very same floats: delays, limits, integral action, noise, a disturbance, a
+    mismatched plant and a divergence (the same sample, the same message)."""
+    import importlib
+
+    cl = importlib.import_module("bwdesign.sim.closed_loop")
+    importlib.import_module("bwdesign.sim.compiled")  # loaded: short runs take it too
+    tp = experiment.replace(a1=experiment.a1 * 1.02, beta=experiment.beta * 0.9)
+    ctrl = tuned(experiment, u_limits=(-30.0, 150.0), estimate_limits=((-50.0, 250.0), None, None))
+    from bwdesign.observers.gains import disturbance_gains_from
+
+    gains = FAST if observer != "phdo" else disturbance_gains_from(FAST)
+    runs = [
+        (loop(experiment, observer, gains=gains, controller=ctrl, delay=d, compensate_delay=c),
+         dict(true_params=tp, noise_std=0.02, seed=3, input_disturbance=lambda t: np.sin(9 * t)))
+        for d, c in ((False, True), (True, True), (True, False))
+    ]  # fmt: skip
+    runs.append(
+        (loop(experiment, observer, gains=gains), dict(true_params=tp.replace(a3=-tp.a3)))
+    )  # the sign of the input reversed: it diverges
+    for lp, kw in runs:
+        a = simulate(lp, Triangle(amplitude=60, offset=90, frequency=2), duration=0.3, **kw)
+        monkeypatch.setattr(cl, "COMPILED_STEP", False)
+        b = simulate(lp, Triangle(amplitude=60, offset=90, frequency=2), duration=0.3, **kw)
+        monkeypatch.undo()
+        assert a.status == b.status and a.settings["path"] == "fast"
+        for name in ("x", "xhat", "u", "z"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.status.startswith("diverged at t = ") and not b.stable
+
+
 def test_hysteresis_jump_fast_equals_generic(experiment):
     lp = loop(experiment, controller=tuned(experiment, hysteresis_jump=True))
     a = simulate(lp, SINE, duration=0.2)

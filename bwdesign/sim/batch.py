@@ -39,7 +39,6 @@ from ..model.params import BoucWenParams
 from ..model.references import Reference
 from ..observers.spec import GAIN_KINDS
 from . import kernel_process
-from .closed_loop import baseline_feedforward
 from .kernel import SCALAR, LoopConstants, discrete_observer_gains, hysteresis_increment_batch
 from .run import Run, disturbance_samples, diverged, kind_label, prepare, resolve_window
 from .run import noise_kind as check_noise_kind
@@ -282,7 +281,7 @@ def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     loop, N = run.loop, len(run.true_params)
     dt, limit = loop.dt, loop.divergence_limit
     xd = run.reference_terms()[0]
-    ff = baseline_feedforward(run)
+    ff = run.baseline_feedforward()
     c = loop.controller.constants()
     law = np.array([c.kp, c.ki, c.da, c.db, c.dt, c.lo, c.hi], dtype=float)
     win = np.append(in_win, False).astype(float)
@@ -304,10 +303,10 @@ def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     return acc
 
 
-def _run_batch(run: Run, in_win: np.ndarray, noise, dist) -> dict:
-    """The loop for every scenario (:func:`.compiled.observer_batch`, the step of
-    :mod:`bwdesign.sim.kernel` compiled)."""
-    loop, N = run.loop, len(run.true_params)
+def _observer_arrays(run: Run, noisy: bool) -> tuple:
+    """``(plant, consts, ref without the window, T)``: :func:`.compiled.observer_batch`'s
+    arrays for ``run`` (the window row is zeros) and the plants' ZOH matrices."""
+    loop = run.loop
     dt, limit = loop.dt, loop.divergence_limit
     ref3 = run.reference_terms()
     c = LoopConstants(loop, discrete_observer_gains(loop), ref3, SCALAR)
@@ -320,19 +319,52 @@ def _run_batch(run: Run, in_win: np.ndarray, noise, dist) -> dict:
     law = np.array(
         [c.kx1, c.kx2, c.kx3, c.ki, c.cdt, c.ulo, c.uhi, float(c.integral), float(c.clip)]
     )
-    win = np.append(in_win, False).astype(float)
-    ref = np.ascontiguousarray(np.stack([np.asarray(c.ff, dtype=float), ref3[0], win]))
+    ref = np.stack([np.asarray(c.ff, dtype=float), ref3[0], np.zeros(run.n + 1)])
     T = true_matrices(list(run.true_params), dt)
-    plant = _plant_rows(T, limit)
     start = run.start
     st = np.array([*(float(v) for v in start.x0), *(float(v) for v in start.xhat0)] + [0.0])
     st[6] = float(start.u_prev)
-    out = np.zeros((N, 21))
+    flags = np.array(
+        [float(c.four), float(c.phso), float(bool(c.delay)), float(bool(c.compensate)),
+         limit, float(noisy)]
+    )  # fmt: skip
+    return _plant_rows(T, limit), (model, gains, law, lim, flags, st), ref, T
+
+
+def _run_batch(run: Run, in_win: np.ndarray, noise, dist) -> dict:
+    """The loop for every scenario (:func:`.compiled.observer_batch`, the step of
+    :mod:`bwdesign.sim.kernel` compiled)."""
+    loop = run.loop
+    plant, consts, ref, T = _observer_arrays(run, False)
+    ref[2] = np.append(in_win, False).astype(float)
+    ref = np.ascontiguousarray(ref)
+    out = np.zeros((len(run.true_params), 21))
     for lo, hi, rows, d, noisy in _chunks(run, noise, dist):
-        flags = np.array(
-            [float(c.four), float(c.phso), float(bool(c.delay)), float(bool(c.compensate)),
-             limit, float(noisy)]
-        )  # fmt: skip
-        consts = (model, gains, law, lim, flags, st)
-        kernel_process.run("observer_drawn", (plant[lo:hi], consts, ref, rows, d, out[lo:hi]), 5)
-    return _finish(out, T, limit, dt, int(np.count_nonzero(in_win)))
+        flags = consts[4].copy()
+        flags[5] = float(noisy)
+        chunk = (*consts[:4], flags, consts[5])
+        kernel_process.run("observer_drawn", (plant[lo:hi], chunk, ref, rows, d, out[lo:hi]), 5)
+    return _finish(out, T, loop.divergence_limit, loop.dt, int(np.count_nonzero(in_win)))
+
+
+def observer_record(run: Run, noise: np.ndarray, dist: np.ndarray | None) -> dict[str, Any]:
+    """The record of :func:`~.closed_loop.simulate`'s sample loop for ``run`` (one plant,
+    its ``noise`` and ``dist`` samples, the law without ``hysteresis_jump``), run by the
+    compiled step (:func:`.compiled.observer_trace`): ``x``, ``xhat``, ``u``, ``z`` (up to
+    the divergence), ``m`` (samples kept), ``stable`` and ``status``, the scalar loop's
+    numbers to the bit."""
+    loop, n = run.loop, run.n
+    plant, consts, ref, T = _observer_arrays(run, True)
+    d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(np.reshape(dist, (1, -1)))
+    rows = np.ascontiguousarray(np.reshape(noise, (1, -1)), dtype=float)
+    trace = np.zeros((n + 1, 9))
+    kernel_process.run("observer_trace", (plant, consts, ref, rows, d, trace), 5)
+    last = trace[n]
+    stable, status, m = bool(last[0] != 0.0), "ok", n
+    if not stable:
+        m = int(last[1]) + 1
+        why = diverged(loop.divergence_limit, T["w0"][0], *last[2:9]) or "non-finite state"
+        status = f"diverged at t = {m * loop.dt:.6g} s: {why}"
+    x, xhat = trace[:n, 0:3].copy(), trace[:n, 3:6].copy()
+    u, z = trace[:n, 6].copy(), trace[:n, 7].copy()
+    return dict(x=x, xhat=xhat, u=u, z=z, m=m, stable=stable, status=status)

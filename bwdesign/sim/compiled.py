@@ -32,6 +32,7 @@ from numba import njit
 
 __all__ = [
     "observer_batch",
+    "observer_trace",
     "baseline_batch",
     "observer_drawn",
     "baseline_drawn",
@@ -162,6 +163,68 @@ def _stop(out, i, k, x1, x2, x3, h1, h2, hw, ua):
     out[i, 15], out[i, 16], out[i, 17], out[i, 18] = h1, h2, hw, ua
 
 
+@njit(cache=True, inline="always")
+def _correct(K, four, z, h1, h2, h3, hd):
+    """:func:`bwdesign.sim.kernel.correct`: the posterior ``(h1, h2, h3, hd, hw)`` after ``z``."""
+    r = z - h1
+    h1 = h1 + K[0] * r
+    h2 = h2 + K[1] * r
+    h3 = h3 + K[2] * r
+    if four:
+        hd = hd + K[3] * r
+        hw = h3 + hd
+    else:
+        hw = h3
+    return h1, h2, h3, hd, hw
+
+
+@njit(cache=True, inline="always")
+def _advance(p, m, lw, lm, sw, x, h, up, ua, q, r0, r1, d):
+    """:func:`bwdesign.sim.kernel.advance` after :func:`_correct`, in its order.
+
+    ``sw`` = (four, phso, delay, compensate, has a disturbance); ``x`` the plant's state,
+    ``h`` = (h1, h2, h3, hd, hw) the posterior; ``r0``, ``r1`` this sample's and the next
+    one's ``(ff, x_d)``; ``d`` this sample's disturbance. Returns the plant's and the
+    observer's next states, the applied input, ``u_a`` and ``q``.
+    """
+    four, phso, delay, compensate = sw[0], sw[1], sw[2], sw[3]
+    h1, h2, h3, hd, hw = h
+    u_next = 0.0
+    if not delay:
+        applied, q = _law(lw, lm, r0[0], r0[1], h1, h2, hw, q)
+    else:
+        applied = ua
+        if not compensate:
+            u_next, q = _law(lw, lm, r0[0], r0[1], h1, h2, hw, q)
+    ud = applied + d if sw[4] else applied
+    x1, x2, x3 = _plant_step(p, x[0], x[1], x[2], up, applied, ud)
+    g3 = hysteresis_jump(m[8], m[9], m[10], h3, up, applied) if phso else h3
+    gw = g3 + hd if four else g3
+    nh1 = m[0] * h1 + m[1] * h2 + m[2] * gw + m[6] * applied
+    h2 = m[3] * h1 + m[4] * h2 + m[5] * gw + m[7] * applied
+    h1 = nh1
+    hw = g3 + hd if four else g3
+    if delay:
+        if compensate:
+            u_next, q = _law(lw, lm, r1[0], r1[1], h1, h2, hw, q)
+        ua = u_next
+    return (x1, x2, x3), (h1, h2, g3, hd, hw), applied, ua, q
+
+
+@njit(cache=True, inline="always")
+def _within(limit, vlim, x, h, ua):
+    """The state inside the divergence limits (:func:`bwdesign.sim.run.diverged`'s test)."""
+    return (
+        abs(x[0]) <= limit
+        and abs(x[2]) <= limit
+        and abs(h[0]) <= limit
+        and abs(h[4]) <= limit
+        and abs(x[1]) <= vlim
+        and abs(h[1]) <= vlim
+        and abs(ua) < 1e300
+    )
+
+
 @njit(cache=True)
 def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dist, out):
     # _LANES scenarios side by side, their states in the rows of S and their sums in A:
@@ -170,13 +233,12 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
     # scenario's own operations are the scalar loop's, in its order
     n = ref.shape[1] - 1
     ff, xd, win = ref[0], ref[1], ref[2]
-    four, phso = flags[0] != 0.0, flags[1] != 0.0
-    delay, compensate = flags[2] != 0.0, flags[3] != 0.0
+    rows = dist.shape[0]
+    sw = (flags[0] != 0.0, flags[1] != 0.0, flags[2] != 0.0, flags[3] != 0.0, rows > 0)
     limit, noisy = flags[4], flags[5] != 0.0
-    K1, K2, K3, K4 = gains[0], gains[1], gains[2], gains[3]
+    K = (gains[0], gains[1], gains[2], gains[3])
     m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
          model[8], model[9], model[10])  # fmt: skip
-    rows = dist.shape[0]
     lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
     lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
     N = plant.shape[0]
@@ -203,76 +265,40 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                     continue
                 i = i0 + j
                 p, vlim = _plant_row(plant, i)
-                x1, x2, x3 = S[j, 0], S[j, 1], S[j, 2]
-                h1, h2, h3, hd, hw = S[j, 3], S[j, 4], S[j, 5], S[j, 6], S[j, 7]
+                x = (S[j, 0], S[j, 1], S[j, 2])
                 up, ua, q = S[j, 8], S[j, 9], S[j, 10]
-                z = x1 + noise[i, k] if noisy else x1
-                r = z - h1
-                h1 = h1 + K1 * r
-                h2 = h2 + K2 * r
-                h3 = h3 + K3 * r
-                if four:
-                    hd = hd + K4 * r
-                    hw = h3 + hd
-                else:
-                    hw = h3
+                z = x[0] + noise[i, k] if noisy else x[0]
+                h = _correct(K, sw[0], z, S[j, 3], S[j, 4], S[j, 5], S[j, 6])
                 if inw:
-                    e = x1 - xd[k]
+                    e = x[0] - xd[k]
                     A[j, 0] += abs(e)
                     A[j, 1] += e * e
                     A[j, 2] = max(A[j, 2], abs(e))
-                    d1, d2, d3 = h1 - x1, h2 - x2, hw - x3
+                    d1, d2, d3 = h[0] - x[0], h[1] - x[1], h[4] - x[2]
                     A[j, 3] += d1 * d1
                     A[j, 4] += d2 * d2
                     A[j, 5] += d3 * d3
                     A[j, 6] = max(A[j, 6], abs(d1))
                     A[j, 7] = max(A[j, 7], abs(d2))
                     A[j, 8] = max(A[j, 8], abs(d3))
-                u_next = 0.0
-                if not delay:
-                    applied, q = _law(lw, lm, ff[k], xd[k], h1, h2, hw, q)
-                else:
-                    applied = ua
-                    if not compensate:
-                        u_next, q = _law(lw, lm, ff[k], xd[k], h1, h2, hw, q)
-                uprev = up
-                ud = applied + dist[i if rows > 1 else 0, k] if rows > 0 else applied
-                x1, x2, x3 = _plant_step(p, x1, x2, x3, uprev, applied, ud)
-                g3 = hysteresis_jump(m[8], m[9], m[10], h3, uprev, applied) if phso else h3
-                gw = g3 + hd if four else g3
-                nh1 = m[0] * h1 + m[1] * h2 + m[2] * gw + m[6] * applied
-                h2 = m[3] * h1 + m[4] * h2 + m[5] * gw + m[7] * applied
-                h1 = nh1
-                h3 = g3
-                hw = g3 + hd if four else g3
-                if delay:
-                    if compensate:
-                        u_next, q = _law(lw, lm, ff[k + 1], xd[k + 1], h1, h2, hw, q)
-                    ua = u_next
-                up = applied
+                d = dist[i if rows > 1 else 0, k] if rows > 0 else 0.0
+                r0, r1 = (ff[k], xd[k]), (ff[k + 1], xd[k + 1])
+                x, h, applied, ua, q = _advance(p, m, lw, lm, sw, x, h, up, ua, q, r0, r1, d)
                 if applied <= lw[5] or applied >= lw[6]:
                     A[j, 10] += 1.0
-                du = applied - uprev
+                du = applied - up
                 if inw:
                     A[j, 9] = max(A[j, 9], abs(du))
                     A[j, 11] = max(A[j, 11], abs(du - S[j, 11]))
                 if track:
                     S[j, 11] = du
-                S[j, 0], S[j, 1], S[j, 2] = x1, x2, x3
-                S[j, 3], S[j, 4], S[j, 5], S[j, 6], S[j, 7] = h1, h2, h3, hd, hw
-                S[j, 8], S[j, 9], S[j, 10] = up, ua, q
-                if (
-                    abs(x1) <= limit
-                    and abs(x3) <= limit
-                    and abs(h1) <= limit
-                    and abs(hw) <= limit
-                    and abs(x2) <= vlim
-                    and abs(h2) <= vlim
-                    and abs(ua) < 1e300
-                ):
+                S[j, 0], S[j, 1], S[j, 2] = x
+                S[j, 3], S[j, 4], S[j, 5], S[j, 6], S[j, 7] = h
+                S[j, 8], S[j, 9], S[j, 10] = applied, ua, q
+                if _within(limit, vlim, x, h, ua):
                     live += 1
                 else:
-                    _stop(out, i, k, x1, x2, x3, h1, h2, hw, ua)
+                    _stop(out, i, k, x[0], x[1], x[2], h[0], h[1], h[4], ua)
                     alive[j] = False
             if live == 0:
                 break
@@ -282,6 +308,54 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 out[i, c] = A[j, c]
             out[i, 19] = A[j, 10]
             out[i, 20] = A[j, 11]
+
+
+def observer_trace(plant, consts, ref, noise, dist, trace):
+    """One scenario of :func:`observer_batch`, its record kept: the sample loop of
+    :func:`bwdesign.sim.simulate` (``fast``), the same floats to the bit.
+
+    ``plant`` (1, 12), ``consts``, ``ref`` and ``dist`` as there; ``noise`` (1, n), read at
+    every sample. ``trace`` (n + 1, 9) is written: row ``k < n`` the true state, the
+    posterior estimate (x1hat, x2hat, the lumped x3hat), the applied input and the
+    measurement at sample ``k``; row ``n`` whether the run stayed within the divergence
+    limits (1.0), the sample where it left them (-1: it did not) and the state there
+    (x1, x2, x3, xhat1, xhat2, xhat_lumped, u_a). Rows after a divergence are not written.
+    """
+    _observer_trace(plant, *consts, ref, noise, dist, trace)
+
+
+@njit(cache=True)
+def _observer_trace(plant, model, gains, law, lim, flags, start, ref, noise, dist, trace):
+    n = ref.shape[1] - 1
+    ff, xd = ref[0], ref[1]
+    sw = (flags[0] != 0.0, flags[1] != 0.0, flags[2] != 0.0, flags[3] != 0.0, dist.shape[0] > 0)
+    limit = flags[4]
+    K = (gains[0], gains[1], gains[2], gains[3])
+    m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
+         model[8], model[9], model[10])  # fmt: skip
+    lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
+    lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
+    p, vlim = _plant_row(plant, 0)
+    x = (start[0], start[1], start[2])
+    h = (start[3], start[4], start[5], 0.0, start[5])
+    up, ua, q = start[6], start[6], 0.0
+    trace[n, 0], trace[n, 1] = 1.0, -1.0
+    for k in range(n):
+        z = x[0] + noise[0, k]
+        h = _correct(K, sw[0], z, h[0], h[1], h[2], h[3])
+        trace[k, 0], trace[k, 1], trace[k, 2] = x
+        trace[k, 3], trace[k, 4], trace[k, 5] = h[0], h[1], h[4]
+        trace[k, 7] = z
+        d = dist[0, k] if sw[4] else 0.0
+        r0, r1 = (ff[k], xd[k]), (ff[k + 1], xd[k + 1])
+        x, h, applied, ua, q = _advance(p, m, lw, lm, sw, x, h, up, ua, q, r0, r1, d)
+        trace[k, 6] = applied
+        up = applied
+        if not _within(limit, vlim, x, h, ua):
+            trace[n, 0], trace[n, 1] = 0.0, k
+            trace[n, 2], trace[n, 3], trace[n, 4] = x
+            trace[n, 5], trace[n, 6], trace[n, 7], trace[n, 8] = h[0], h[1], h[4], ua
+            break
 
 
 @njit(cache=True)

@@ -131,6 +131,13 @@ class Run:
         t = np.arange(self.n + 1) * self.loop.dt
         return tuple(np.asarray(a, dtype=float) for a in self.reference.evaluate(t))
 
+    def baseline_feedforward(self) -> np.ndarray:
+        """A baseline loop's feedforward per sample, for the input applied after sample
+        ``k``'s law: at ``t_k + dt/2``, one sample later with a computation delay."""
+        loop = self.loop
+        lead = 0.5 * loop.dt + (loop.dt if loop.delay else 0.0)
+        return loop.controller.feedforward_samples(self.reference, self.t + lead)
+
 
 def prepare(
     loop: ClosedLoop,
