@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from types import FrameType
@@ -37,6 +38,10 @@ __all__ = ["check", "deferred", "handling", "interrupt", "pending", "record"]
 
 #: SIGINTs recorded inside :func:`handling`; None outside it.
 _recorded: list[int] | None = None
+#: Whether the first SIGINT's KeyboardInterrupt was raised where it propagates.
+_raised = False
+#: The ``sys.unraisablehook`` :func:`handling` replaced.
+_hooks: list[Any] = []
 
 
 def _main_thread() -> bool:
@@ -67,10 +72,29 @@ def interrupt() -> NoReturn:
 
 
 def _on_sigint(signum: int, frame: FrameType | None) -> None:
-    first = not pending()
+    global _raised
+    first = not _raised
     record()
     if first:  # later ones only count: the cleanup after the first must finish
+        _raised = True
         raise KeyboardInterrupt
+
+
+def _ignored(args: Any) -> None:
+    """``sys.unraisablehook`` inside :func:`handling`.
+
+    A SIGINT that arrives while Python runs a weakref callback or a ``__del__`` (the
+    import system's lock clean-up, for one) raises its KeyboardInterrupt where Python
+    ignores exceptions: it would print "Exception ignored ... Traceback" and go on. The
+    interrupt is recorded, so the next :func:`check` raises it (every LMI solve, every
+    part of a study, every output committed asks); such a KeyboardInterrupt is not
+    printed, and the next SIGINT raises again. Anything else goes to the previous hook.
+    """
+    global _raised
+    if isinstance(args.exc_value, KeyboardInterrupt) and _recorded is not None:
+        _raised = False
+        return
+    _hooks[-1](args)
 
 
 @contextlib.contextmanager
@@ -84,12 +108,14 @@ def handling(*, then_ignore: bool = False) -> Iterator[None]:
     traceback). Re-entering while active, or outside the main thread, does not
     install anything.
     """
-    global _recorded
+    global _recorded, _raised
     if _recorded is not None or not _main_thread():
         yield
         return
     previous: Any = signal.getsignal(signal.SIGINT)
-    _recorded = []
+    _recorded, _raised = [], False
+    _hooks.append(sys.unraisablehook)
+    sys.unraisablehook = _ignored
     try:
         signal.signal(signal.SIGINT, _on_sigint)
         yield
@@ -98,6 +124,7 @@ def handling(*, then_ignore: bool = False) -> Iterator[None]:
             signal.signal(signal.SIGINT, signal.SIG_IGN)
         else:  # None: a handler not set from Python, which cannot be put back
             signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+        sys.unraisablehook = _hooks.pop()
         _recorded = None
 
 
@@ -136,4 +163,6 @@ def deferred() -> Iterator[None]:
         # a SIGINT that waited for the unblock is delivered here, to ``previous``
         signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
     if seen and swap and previous is not signal.SIG_IGN:
+        global _raised
+        _raised = True  # as the handler's first raise: later SIGINTs are only recorded
         raise KeyboardInterrupt

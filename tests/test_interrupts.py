@@ -177,6 +177,38 @@ def test_deferred_holds_sigint_for_the_block_and_its_child_processes():
     assert reached
 
 
+def test_a_ctrl_c_inside_a_weakref_callback_is_recorded_and_not_printed(capsys):
+    """Python ignores an exception raised in a weakref callback or __del__ (the import
+    system's lock clean-up is one; CI met a Ctrl-C there once): inside handling() such a
+    KeyboardInterrupt is not printed as "Exception ignored ... Traceback", the interrupt
+    stays recorded (the next check() raises it) and the next Ctrl-C raises at once."""
+    import weakref
+
+    class Thing:
+        pass
+
+    def callback(_ref):
+        os.kill(os.getpid(), signal.SIGINT)  # its handler runs inside this callback
+        for _ in range(100):
+            pass
+
+    hook = sys.unraisablehook
+    with interrupts.handling():
+        thing = Thing()
+        ref = weakref.ref(thing, callback)
+        del thing  # the callback runs here, and swallows the KeyboardInterrupt
+        assert ref() is None and interrupts.pending()
+        with pytest.raises(KeyboardInterrupt):
+            interrupts.check()
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+            for _ in range(1000):
+                pass
+    err = capsys.readouterr().err
+    assert "Exception ignored" not in err and "Traceback" not in err, err
+    assert sys.unraisablehook is hook  # put back
+
+
 # -- the package loads its API on first use: the command line starts light ---------------
 
 

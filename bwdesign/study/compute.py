@@ -13,6 +13,7 @@ from collections.abc import Callable, Iterable
 from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
+from .. import interrupts
 from ..certify.linear import error_dynamics, hysteresis_bode
 from ..certify.tiers import certify
 from ..control.analysis import analyze_loop
@@ -141,6 +142,7 @@ class _Run:
     def compute(self, part: str) -> Any:
         """The part ``part``: computed before, sent by the second process, or computed now."""
         if part not in self.done:
+            interrupts.check()  # a Ctrl-C a library swallowed: no part begins after it
             got, value = False, None
             if self.beside is not None and part in self.beside.keys:
                 got, value = self.beside.result(part)
