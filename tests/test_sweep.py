@@ -649,21 +649,25 @@ def test_compiled_noise_is_numpys(seed, n, scale):
     assert np.array_equal(out, scale * np.random.default_rng(seed).standard_normal(n))
 
 
+def _tuned_or_baseline(tune, observer):
+    """The tuned law with ``observer``, or (``"baseline"``) the stage's tuned PI loop."""
+    from bwdesign import tune_baseline
+
+    if observer == "baseline":
+        return ClosedLoop(P, None, tune_baseline(P, DT), dt=DT)
+    ctl = DiscreteTrackingController(
+        P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
+    )
+    return _loop(ctl, observer, tune.gains)
+
+
 @pytest.mark.parametrize("observer", ["phso", "baseline"])
 def test_bounded_noise_is_at_its_bound_and_the_batch_matches_simulate(tune, observer):
     """noise_kind="bounded": +-noise_std at every sample (the bound a certificate covers),
     drawn from the same seed; the batch equals simulate to the bit, as for Gaussian noise."""
-    from bwdesign import tune_baseline
-
     tps, _ = _mismatched(3, seed=4)
     ref = Sine(amplitude=60, offset=80, frequency=2)
-    if observer == "baseline":
-        loop = ClosedLoop(P, None, tune_baseline(P, DT), dt=DT)
-    else:
-        ctl = DiscreteTrackingController(
-            P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
-        )
-        loop = _loop(ctl, observer, tune.gains)
+    loop = _tuned_or_baseline(tune, observer)
     kw = dict(duration=0.5, noise_std=0.02, noise_kind="bounded")
     b = simulate_batch(loop, ref, tps, seeds=[3, 4, 5], **kw)
     for i, tp in enumerate(tps):
@@ -689,17 +693,9 @@ def test_a_noise_pattern_is_the_noise_and_the_batch_matches_simulate(tune, obser
     """noise_kind as a pattern: noise_std times the given values, sample by sample (the
     falsifier's aimed noise); one row per scenario in the batch, equal to simulate's to the
     bit; a pattern outside [-1, 1], of the wrong length or not finite is refused."""
-    from bwdesign import tune_baseline
-
     tps, _ = _mismatched(2, seed=5)
     ref = Sine(amplitude=60, offset=80, frequency=2)
-    if observer == "baseline":
-        loop = ClosedLoop(P, None, tune_baseline(P, DT), dt=DT)
-    else:
-        ctl = DiscreteTrackingController(
-            P, tune.lambda1, tune.lambda2, dt=DT, integral_rate=tune.integral_rate
-        )
-        loop = _loop(ctl, observer, tune.gains)
+    loop = _tuned_or_baseline(tune, observer)
     n = int(round(0.5 / DT))
     rows = np.random.default_rng(8).uniform(-1, 1, (2, n))
     b = simulate_batch(loop, ref, tps, duration=0.5, noise_std=0.03, noise_kind=rows)
