@@ -357,16 +357,14 @@ def observer_record(run: Run, noise: np.ndarray, dist: np.ndarray | None) -> dic
     plant, consts, ref, T = _observer_arrays(run, True)
     d = np.zeros((0, 1)) if dist is None else np.ascontiguousarray(np.reshape(dist, (1, -1)))
     rows = np.ascontiguousarray(np.reshape(noise, (1, -1)), dtype=float)
-    rec = np.zeros(21 + 8 * n)
-    kernel_process.run(
-        "observer_trace", (plant, consts, np.ascontiguousarray(ref), rows, d, rec), 5
-    )
-    out, trace = rec[:21], rec[21:].reshape(n, 8)
-    stable, status, m = bool(out[10] != 0.0), "ok", n
+    trace = np.zeros((n + 1, 9))
+    kernel_process.run("observer_trace", (plant, consts, ref, rows, d, trace), 5)
+    last = trace[n]
+    stable, status, m = bool(last[0] != 0.0), "ok", n
     if not stable:
-        m = int(out[11]) + 1
-        why = diverged(loop.divergence_limit, T["w0"][0], *out[12:19]) or "non-finite state"
+        m = int(last[1]) + 1
+        why = diverged(loop.divergence_limit, T["w0"][0], *last[2:9]) or "non-finite state"
         status = f"diverged at t = {m * loop.dt:.6g} s: {why}"
-    x, xhat = trace[:, 0:3].copy(), trace[:, 3:6].copy()
-    u, z = trace[:, 6].copy(), trace[:, 7].copy()
+    x, xhat = trace[:n, 0:3].copy(), trace[:n, 3:6].copy()
+    u, z = trace[:n, 6].copy(), trace[:n, 7].copy()
     return dict(x=x, xhat=xhat, u=u, z=z, m=m, stable=stable, status=status)

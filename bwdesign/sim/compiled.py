@@ -133,11 +133,7 @@ def observer_batch(plant, consts, ref, noise, dist, out):
         the number of samples whose applied input is at an input limit, d2u_max (the
         largest ``|u_k - 2 u_(k-1) + u_(k-2)|`` of the applied input in the window).
     """
-    _observer_batch(plant, *consts, ref, noise, dist, out, _NO_TRACE)
-
-
-#: The record :func:`observer_batch` does not keep (:func:`observer_trace` keeps one).
-_NO_TRACE = np.zeros((0, 1, 8))
+    _observer_batch(plant, *consts, ref, noise, dist, out)
 
 
 @njit(cache=True, inline="always")
@@ -230,7 +226,7 @@ def _within(limit, vlim, x, h, ua):
 
 
 @njit(cache=True)
-def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dist, out, trace):
+def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dist, out):
     # _LANES scenarios side by side, their states in the rows of S and their sums in A:
     # the steps of different scenarios are independent, so the processor overlaps one's
     # hysteresis jumps with the other's (36 instead of 40 ns a scenario-step); each
@@ -245,7 +241,7 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
          model[8], model[9], model[10])  # fmt: skip
     lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
     lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
-    N, tracing = plant.shape[0], trace.shape[0] > 0
+    N = plant.shape[0]
     # x1, x2, x3, xhat1, xhat2, xhat3, dhat, lumped, u_prev, u_a, q, the last input step
     S = np.empty((_LANES, 12))
     A = np.empty((_LANES, 12))  # out[:, 0:10], out[:, 19] and out[:, 20]
@@ -273,10 +269,6 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 up, ua, q = S[j, 8], S[j, 9], S[j, 10]
                 z = x[0] + noise[i, k] if noisy else x[0]
                 h = _correct(K, sw[0], z, S[j, 3], S[j, 4], S[j, 5], S[j, 6])
-                if tracing:
-                    trace[i, k, 0], trace[i, k, 1], trace[i, k, 2] = x
-                    trace[i, k, 3], trace[i, k, 4], trace[i, k, 5] = h[0], h[1], h[4]
-                    trace[i, k, 7] = z
                 if inw:
                     e = x[0] - xd[k]
                     A[j, 0] += abs(e)
@@ -292,8 +284,6 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
                 d = dist[i if rows > 1 else 0, k] if rows > 0 else 0.0
                 r0, r1 = (ff[k], xd[k]), (ff[k + 1], xd[k + 1])
                 x, h, applied, ua, q = _advance(p, m, lw, lm, sw, x, h, up, ua, q, r0, r1, d)
-                if tracing:
-                    trace[i, k, 6] = applied
                 if applied <= lw[5] or applied >= lw[6]:
                     A[j, 10] += 1.0
                 du = applied - up
@@ -320,22 +310,52 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
             out[i, 20] = A[j, 11]
 
 
-def observer_trace(plant, consts, ref, noise, dist, rec):
-    """One scenario of :func:`observer_batch` with its record kept: the sample loop of
+def observer_trace(plant, consts, ref, noise, dist, trace):
+    """One scenario of :func:`observer_batch`, its record kept: the sample loop of
     :func:`bwdesign.sim.simulate` (``fast``), the same floats to the bit.
 
     ``plant`` (1, 12), ``consts``, ``ref`` and ``dist`` as there; ``noise`` (1, n), read at
-    every sample (the noise flag is ignored). ``rec`` (21 + 8 n,) is written: the
-    scenario's ``out`` row of :func:`observer_batch` (whether it stayed within the
-    divergence limits, where it left them and its state there), then sample by sample
-    the true state, the posterior estimate (x1hat, x2hat, the lumped x3hat), the applied
-    input and the measurement. Samples after a divergence are not written.
+    every sample. ``trace`` (n + 1, 9) is written: row ``k < n`` the true state, the
+    posterior estimate (x1hat, x2hat, the lumped x3hat), the applied input and the
+    measurement at sample ``k``; row ``n`` whether the run stayed within the divergence
+    limits (1.0), the sample where it left them (-1: it did not) and the state there
+    (x1, x2, x3, xhat1, xhat2, xhat_lumped, u_a). Rows after a divergence are not written.
     """
+    _observer_trace(plant, *consts, ref, noise, dist, trace)
+
+
+@njit(cache=True)
+def _observer_trace(plant, model, gains, law, lim, flags, start, ref, noise, dist, trace):
     n = ref.shape[1] - 1
-    flags = consts[4].copy()
-    flags[5] = 1.0
-    out, trace = rec[:21].reshape(1, 21), rec[21:].reshape(1, n, 8)
-    _observer_batch(plant, *consts[:4], flags, consts[5], ref, noise, dist, out, trace)
+    ff, xd = ref[0], ref[1]
+    sw = (flags[0] != 0.0, flags[1] != 0.0, flags[2] != 0.0, flags[3] != 0.0, dist.shape[0] > 0)
+    limit = flags[4]
+    K = (gains[0], gains[1], gains[2], gains[3])
+    m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
+         model[8], model[9], model[10])  # fmt: skip
+    lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
+    lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
+    p, vlim = _plant_row(plant, 0)
+    x = (start[0], start[1], start[2])
+    h = (start[3], start[4], start[5], 0.0, start[5])
+    up, ua, q = start[6], start[6], 0.0
+    trace[n, 0], trace[n, 1] = 1.0, -1.0
+    for k in range(n):
+        z = x[0] + noise[0, k]
+        h = _correct(K, sw[0], z, h[0], h[1], h[2], h[3])
+        trace[k, 0], trace[k, 1], trace[k, 2] = x
+        trace[k, 3], trace[k, 4], trace[k, 5] = h[0], h[1], h[4]
+        trace[k, 7] = z
+        d = dist[0, k] if sw[4] else 0.0
+        r0, r1 = (ff[k], xd[k]), (ff[k + 1], xd[k + 1])
+        x, h, applied, ua, q = _advance(p, m, lw, lm, sw, x, h, up, ua, q, r0, r1, d)
+        trace[k, 6] = applied
+        up = applied
+        if not _within(limit, vlim, x, h, ua):
+            trace[n, 0], trace[n, 1] = 0.0, k
+            trace[n, 2], trace[n, 3], trace[n, 4] = x
+            trace[n, 5], trace[n, 6], trace[n, 7], trace[n, 8] = h[0], h[1], h[4], ua
+            break
 
 
 @njit(cache=True)
