@@ -8,7 +8,9 @@ are that step written out once more as scalar code, compiled by numba and run sc
 after scenario (the observer loop two scenarios side by side, each its own operations):
 :func:`observer_batch` (:func:`~bwdesign.sim.kernel.correct` and
 :func:`~bwdesign.sim.kernel.advance`) and :func:`baseline_batch`
-(:func:`~bwdesign.sim.kernel.advance_baseline`). Each does the scalar loop's float
+(:func:`~bwdesign.sim.kernel.advance_baseline`); :func:`observer_trace` runs the observer
+loop's step (the same inline helpers) for one scenario and keeps its record, for
+:func:`bwdesign.sim.simulate`'s fast path. Each does the scalar loop's float
 operations in the same order, with the same closed-form hysteresis jump
 (:func:`bwdesign.model.plant.hysteresis_increment`; numba calls the same libm ``exp``,
 ``expm1`` and ``log1p`` as Python's ``math``), so every scenario's metrics equal
