@@ -256,9 +256,7 @@ def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, 
     alive = out[:, 10] != 0.0
     status = ["ok"] * out.shape[0]
     for i in np.flatnonzero(~alive):
-        x1, x2, x3, h1, h2, hw, ua = out[i, 12:19]
-        why = diverged(limit, T["w0"][i], x1, x2, x3, h1, h2, hw, ua) or "non-finite state"
-        status[i] = f"diverged at t = {(int(out[i, 11]) + 1) * dt:.6g} s: {why}"
+        status[i] = _stopped(out[i, 11:19], limit, T["w0"][i], dt)
     return {
         "sum_abs": out[:, 0].copy(),
         "sum_sq": out[:, 1].copy(),
@@ -274,6 +272,13 @@ def _finish(out: np.ndarray, T: dict[str, np.ndarray], limit: float, dt: float, 
         "alive": alive,
         "status": status,
     }
+
+
+def _stopped(where: np.ndarray, limit: float, w0: float, dt: float) -> str:
+    """The status of a run the kernel stopped: ``where`` = its step, then its state there
+    (x1, x2, x3, xhat1, xhat2, xhat_lumped, u_a), as the compiled runners write them."""
+    why = diverged(limit, w0, *where[1:8]) or "non-finite state"
+    return f"diverged at t = {(int(where[0]) + 1) * dt:.6g} s: {why}"
 
 
 def _run_batch_baseline(run: Run, in_win: np.ndarray, noise, dist) -> dict:
@@ -363,8 +368,7 @@ def observer_record(run: Run, noise: np.ndarray, dist: np.ndarray | None) -> dic
     stable, status, m = bool(last[0] != 0.0), "ok", n
     if not stable:
         m = int(last[1]) + 1
-        why = diverged(loop.divergence_limit, T["w0"][0], *last[2:9]) or "non-finite state"
-        status = f"diverged at t = {m * loop.dt:.6g} s: {why}"
+        status = _stopped(last[1:9], loop.divergence_limit, T["w0"][0], loop.dt)
     x, xhat = trace[:n, 0:3].copy(), trace[:n, 3:6].copy()
     u, z = trace[:n, 6].copy(), trace[:n, 7].copy()
     return dict(x=x, xhat=xhat, u=u, z=z, m=m, stable=stable, status=status)

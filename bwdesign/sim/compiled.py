@@ -166,6 +166,20 @@ def _stop(out, i, k, x1, x2, x3, h1, h2, hw, ua):
 
 
 @njit(cache=True, inline="always")
+def _loop_constants(model, gains, law, lim, flags, rows):
+    """The observer loop's constants as tuples (their entries stay in registers over the
+    run): the switches (four, phso, delay, compensate, a disturbance given), the gains, the
+    model, the law and the estimate limits (:func:`observer_batch`'s ``consts``)."""
+    sw = (flags[0] != 0.0, flags[1] != 0.0, flags[2] != 0.0, flags[3] != 0.0, rows > 0)
+    K = (gains[0], gains[1], gains[2], gains[3])
+    m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
+         model[8], model[9], model[10])  # fmt: skip
+    lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
+    lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
+    return sw, K, m, lw, lm
+
+
+@njit(cache=True, inline="always")
 def _correct(K, four, z, h1, h2, h3, hd):
     """:func:`bwdesign.sim.kernel.correct`: the posterior ``(h1, h2, h3, hd, hw)`` after ``z``."""
     r = z - h1
@@ -236,13 +250,8 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
     n = ref.shape[1] - 1
     ff, xd, win = ref[0], ref[1], ref[2]
     rows = dist.shape[0]
-    sw = (flags[0] != 0.0, flags[1] != 0.0, flags[2] != 0.0, flags[3] != 0.0, rows > 0)
+    sw, K, m, lw, lm = _loop_constants(model, gains, law, lim, flags, rows)
     limit, noisy = flags[4], flags[5] != 0.0
-    K = (gains[0], gains[1], gains[2], gains[3])
-    m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
-         model[8], model[9], model[10])  # fmt: skip
-    lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
-    lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
     N = plant.shape[0]
     # x1, x2, x3, xhat1, xhat2, xhat3, dhat, lumped, u_prev, u_a, q, the last input step
     S = np.empty((_LANES, 12))
@@ -330,13 +339,8 @@ def observer_trace(plant, consts, ref, noise, dist, trace):
 def _observer_trace(plant, model, gains, law, lim, flags, start, ref, noise, dist, trace):
     n = ref.shape[1] - 1
     ff, xd = ref[0], ref[1]
-    sw = (flags[0] != 0.0, flags[1] != 0.0, flags[2] != 0.0, flags[3] != 0.0, dist.shape[0] > 0)
+    sw, K, m, lw, lm = _loop_constants(model, gains, law, lim, flags, dist.shape[0])
     limit = flags[4]
-    K = (gains[0], gains[1], gains[2], gains[3])
-    m = (model[0], model[1], model[2], model[3], model[4], model[5], model[6], model[7],
-         model[8], model[9], model[10])  # fmt: skip
-    lw = (law[0], law[1], law[2], law[3], law[4], law[5], law[6], law[7], law[8])
-    lm = (lim[0], lim[1], lim[2], lim[3], lim[4], lim[5])
     p, vlim = _plant_row(plant, 0)
     x = (start[0], start[1], start[2])
     h = (start[3], start[4], start[5], 0.0, start[5])

@@ -138,9 +138,10 @@ class _Search:
 
     def aim_noise(self) -> None:
         """Step 4 of the module doc, on the worst plant so far (if its runs were stable)."""
-        tp = self.plants[self.worst()]
-        if self.noise_max <= 0 or not np.isfinite(self.per_plant[self.worst()][0]):
+        i = self.worst()
+        if self.noise_max <= 0 or not np.isfinite(self.per_plant[i][0]):
             return
+        tp = self.plants[i]
         duration, window = span(self.reference)
         run = {"duration": duration, "true_params": tp, "window": window}
         base = simulate(self.loop, self.reference, **run)
