@@ -61,13 +61,12 @@ lint: $(STAMP)
 	$(BIN)/ruff check bwdesign tests analysis benchmarks examples docs/conf.py docs/api_names.py
 	$(BIN)/ruff format --check bwdesign tests analysis benchmarks examples docs/conf.py docs/api_names.py
 
+# every benchmark runs; the exit status is 1 if any missed its target (or failed)
+BENCHES = observers certify codegen sweep identify report
 bench: $(STAMP)
-	$(BIN)/python benchmarks/bench_observers.py
-	$(BIN)/python benchmarks/bench_certify.py
-	$(BIN)/python benchmarks/bench_codegen.py
-	$(BIN)/python benchmarks/bench_sweep.py
-	$(BIN)/python benchmarks/bench_identify.py
-	$(BIN)/python benchmarks/bench_report.py
+	@failed=""; for b in $(BENCHES); do \
+	  $(BIN)/python benchmarks/bench_$$b.py || failed="$$failed $$b"; done; \
+	if [ -n "$$failed" ]; then echo "bench: target missed or failed in:$$failed"; exit 1; fi
 
 # the hysteretic benchmark (Noel and Schoukens 2016) with the structural form: identification
 # time and validation RMS errors beside the published figures (SEEDS records)
