@@ -207,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
         }
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1)
-    return 0
+    return 0 if phso_med <= kf_med else 1
 
 
 if __name__ == "__main__":

@@ -138,6 +138,7 @@ def main(argv=None) -> int:
     print(f"  scalar simulate():          {s:10.3g} steps/s   (batched / scalar = {b / s:.0f}x)")
     print(f"  solve_ivp plant (Radau):    {i:10.3g} steps/s   (x1 relative to exact ZOH {err:.1e})")
     out = {"batched": b, "scalar": s, "solve_ivp": i, "solve_ivp_error": err}
+    met = b >= TARGET
     if args.sweep:
         for w in (1, 2):
             out[f"sweep_{w}_workers_s"] = t = sweep_time(args.sweep, w)
@@ -147,9 +148,10 @@ def main(argv=None) -> int:
             f"  2 workers / 1 worker speed-up: {ratio:.2f}x (target > 1: "
             f"{'met' if ratio > 1 else 'NOT met'})"
         )
+        met = met and ratio > 1
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=2))
-    return 0
+    return 0 if met else 1
 
 
 if __name__ == "__main__":
