@@ -335,7 +335,8 @@ def _smoothed_response(frd: Any) -> Callable[[Any], Any]:
     """``w -> frd(1j * w)`` of a SISO smoothed FRD: python-control's spline, evaluated at
     every frequency in one ``splev`` call instead of one call per frequency (its
     ``FRD.eval`` loops in Python; the spline and the arithmetic are the same, so the
-    values are the same to the bit). Another python-control's FRD is called as it is."""
+    values are the same to the bit). It reads the FRD's private spline (``_ifunc``); a
+    python-control without it gets the FRD called as it is."""
     from scipy.interpolate import splev
 
     ifunc = getattr(frd, "_ifunc", None)
