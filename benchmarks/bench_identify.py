@@ -30,8 +30,9 @@ import statistics
 import sys
 import time
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")  # before numpy loads, as the command line does
+from bwdesign.cli import one_blas_thread  # loads no numpy
+
+one_blas_thread()  # before numpy loads, as the command line does
 
 import numpy as np  # noqa: E402
 
