@@ -51,6 +51,55 @@ def test_background_sends_results_and_gives_up_on_failures():
     assert got["none"]
 
 
+def test_split_computes_every_second_task_there_and_raises_errors_in_order():
+    got = run_python(
+        """
+        import json, os
+        from bwdesign.study import background
+        me = os.getpid()
+        def where(k):
+            return lambda: [k, os.getpid() == me]
+        def fail(k):
+            def f():
+                raise ValueError(k)
+            return f
+        def only_here(k):
+            def f():
+                if os.getpid() != me:
+                    raise RuntimeError("not in the child")
+                return k
+            return f
+        out = {"values": background.split([(str(k), where(k)) for k in range(5)])}
+        out["one"] = background.split([("a", where("a"))])
+        out["none"] = background.split([])
+        # the child's task fails there: computed here, in its turn
+        out["fallback"] = background.split([("a", where("a")), ("b", only_here("b"))])
+        errors = {}
+        for name, tasks in {
+            "child_first": [("a", where("a")), ("b", fail("b")), ("c", fail("c"))],
+            "here_first": [("a", fail("a")), ("b", fail("b"))],
+        }.items():
+            try:
+                background.split(tasks)
+            except ValueError as e:
+                errors[name] = str(e)
+        out["errors"] = errors
+        # a waited Background keeps its results, and this process may fork again
+        bg = background.start([("x", lambda: 7)])
+        bg.wait()
+        out["after_wait"] = [list(bg.result("x")), background.available()]
+        bg.close()
+        print(json.dumps(out))
+        """
+    )
+    # even positions here (True), odd ones in the child (False), in the tasks' order
+    assert got["values"] == [[0, True], [1, False], [2, True], [3, False], [4, True]]
+    assert got["one"] == [["a", True]] and got["none"] == []
+    assert got["fallback"] == [["a", True], "b"]
+    assert got["errors"] == {"child_first": "b", "here_first": "a"}
+    assert got["after_wait"] == [[True, 7], True]
+
+
 def test_background_not_available_with_other_threads():
     # this test process runs pytest's threads (or may): available() must not fork then
     import threading

@@ -31,7 +31,7 @@ from typing import Any
 
 from ..sim import kernel_process
 
-__all__ = ["Background", "start", "available"]
+__all__ = ["Background", "start", "available", "split"]
 
 
 def available() -> bool:
@@ -48,6 +48,43 @@ def start(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> Background | None:
         return Background(tasks)
     except OSError:  # no process or pipe to be had: the caller works alone
         return None
+
+
+def split(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> list[Any]:
+    """The values of ``tasks`` (``(key, function)`` pairs, distinct keys) in their order,
+    every second task computed meanwhile by a forked child where one can be forked
+    (:func:`available`); the values are the same either way.
+
+    The error is the one computing the tasks in order meets first: a task of this
+    process's share that raises is raised in its turn, after the tasks before it; a task
+    the child did not deliver (it raised there, or the child is gone) is computed here.
+    """
+    theirs = list(tasks[1::2])
+    other = start(theirs) if theirs else None
+    mine = list(tasks) if other is None else list(tasks[0::2])
+    done: dict[str, tuple[bool, Any]] = {}
+    try:
+        for key, task in mine:
+            try:
+                done[key] = (True, task())
+            except Exception as exc:  # noqa: BLE001 - raised in its turn below
+                done[key] = (False, exc)
+                if other is None:
+                    break  # working alone: the tasks after it are not needed
+        out = []
+        for key, task in tasks:
+            if key in done:
+                ok, value = done[key]
+                if not ok:
+                    raise value
+                out.append(value)
+            else:
+                got, value = other.result(key) if other is not None else (False, None)
+                out.append(value if got else task())
+        return out
+    finally:
+        if other is not None:
+            other.close()
 
 
 class Background:
@@ -102,6 +139,18 @@ class Background:
             if key in self._results:
                 return True, self._results.pop(key)
         return False, None
+
+    def wait(self) -> None:
+        """Wait until the child has sent all it will and ended, and reap it: then this
+        process runs no thread of its own for it (and may fork again). The results stay
+        for :meth:`result`."""
+        self._reader.join()
+        if self.pid:
+            try:
+                os.waitpid(self.pid, 0)
+            except ChildProcessError:
+                pass
+            self.pid = 0
 
     def close(self) -> None:
         """Stop the child (if still running) and reap it."""
