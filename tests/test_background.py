@@ -70,6 +70,11 @@ def test_split_computes_every_second_task_there_and_raises_errors_in_order():
                 return k
             return f
         out = {"values": background.split([(str(k), where(k)) for k in range(5)])}
+        # here=False: both halves in children of their own, the same values
+        out["away"] = background.split([(str(k), where(k)) for k in range(3)], here=False)
+        out["away_fallback"] = background.split(
+            [("a", only_here("a")), ("b", where("b"))], here=False
+        )
         out["one"] = background.split([("a", where("a"))])
         out["none"] = background.split([])
         # the child's task fails there: computed here, in its turn
@@ -94,6 +99,8 @@ def test_split_computes_every_second_task_there_and_raises_errors_in_order():
     )
     # even positions here (True), odd ones in the child (False), in the tasks' order
     assert got["values"] == [[0, True], [1, False], [2, True], [3, False], [4, True]]
+    assert got["away"] == [[0, False], [1, False], [2, False]]
+    assert got["away_fallback"] == ["a", ["b", False]]  # failed there: computed here
     assert got["one"] == [["a", True]] and got["none"] == []
     assert got["fallback"] == [["a", True], "b"]
     assert got["errors"] == {"child_first": "b", "here_first": "a"}

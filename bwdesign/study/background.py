@@ -31,7 +31,7 @@ from typing import Any
 
 from ..sim import kernel_process
 
-__all__ = ["Background", "start", "available", "split"]
+__all__ = ["Background", "start", "start_each", "available", "split"]
 
 
 def available() -> bool:
@@ -42,29 +42,54 @@ def available() -> bool:
 
 def start(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> Background | None:
     """A :class:`Background` running ``tasks``, or ``None`` (no task, or no fork here)."""
-    if not tasks or not available():
-        return None
-    try:
-        return Background(tasks)
-    except OSError:  # no process or pipe to be had: the caller works alone
-        return None
+    return start_each([tasks])[0]
 
 
-def split(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> list[Any]:
+def start_each(
+    groups: Sequence[Sequence[tuple[str, Callable[[], Any]]]],
+) -> list[Background | None]:
+    """A :class:`Background` for each group of tasks (``None`` for an empty group, or all
+    ``None`` where no fork can be made). Every child is forked before any of them has a
+    reader thread here: a fork needs this process to run no other thread."""
+    if not any(groups) or not available():
+        return [None] * len(groups)
+    out: list[Background | None] = []
+    for tasks in groups:
+        try:
+            out.append(Background(tasks, read=False) if tasks else None)
+        except OSError:  # no process or pipe to be had: the caller works alone
+            out.append(None)
+    for child in out:
+        if child is not None:
+            child._reader.start()
+    return out
+
+
+def split(tasks: Sequence[tuple[str, Callable[[], Any]]], *, here: bool = True) -> list[Any]:
     """The values of ``tasks`` (``(key, function)`` pairs, distinct keys) in their order,
     every second task computed meanwhile by a forked child where one can be forked
     (:func:`available`); the values are the same either way.
 
-    The error is the one computing the tasks in order meets first: a task of this
-    process's share that raises is raised in its turn, after the tasks before it; a task
-    the child did not deliver (it raised there, or the child is gone) is computed here.
+    ``here=False``: the other tasks too are computed by a child of their own while this
+    process waits, so what they allocate is not added to this process's memory (a
+    child's resident memory starts below its parent's). The error is the one computing
+    the tasks in order meets first: a task computed here that raises is raised in its
+    turn, after the tasks before it; a task a child did not deliver (it raised there, or
+    the child is gone) is computed here then.
     """
-    theirs = list(tasks[1::2])
-    other = start(theirs) if theirs else None
-    mine = list(tasks) if other is None else list(tasks[0::2])
+    if len(tasks) < 2:
+        return [task() for _, task in tasks]
+    theirs, mine = list(tasks[1::2]), list(tasks[0::2])
+    other, second = start_each([theirs, [] if here else mine])
+    if other is None:
+        mine = list(tasks)
+        if second is not None:  # (no pipe for the first child): this process does the rest
+            second.close()
+            second = None
+    children = [c for c in (other, second) if c is not None]
     done: dict[str, tuple[bool, Any]] = {}
     try:
-        for key, task in mine:
+        for key, task in mine if second is None else ():
             try:
                 done[key] = (True, task())
             except Exception as exc:  # noqa: BLE001 - raised in its turn below
@@ -78,13 +103,16 @@ def split(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> list[Any]:
                 if not ok:
                     raise value
                 out.append(value)
-            else:
-                got, value = other.result(key) if other is not None else (False, None)
-                out.append(value if got else task())
+                continue
+            got, value = False, None
+            for child in children:
+                if key in child.keys:
+                    got, value = child.result(key)
+            out.append(value if got else task())
         return out
     finally:
-        if other is not None:
-            other.close()
+        for child in children:
+            child.close()
 
 
 class Background:
@@ -97,25 +125,28 @@ class Background:
         The child stops at the first task that raises or whose value does not pickle.
     """
 
-    def __init__(self, tasks: Sequence[tuple[str, Callable[[], Any]]]) -> None:
+    def __init__(
+        self, tasks: Sequence[tuple[str, Callable[[], Any]]], *, read: bool = True
+    ) -> None:
         self.keys = tuple(k for k, _ in tasks)
         self._results: dict[str, Any] = {}
         self._done = threading.Condition()
         self._finished = False
-        read, write = os.pipe()
+        fd, write = os.pipe()
         try:
             pid = kernel_process.fork()  # streams flushed, SIGINT blocked in the child
         except OSError:
-            os.close(read)
+            os.close(fd)
             os.close(write)
             raise
         if pid == 0:  # the child (SIGINT stays blocked): never returns
-            os.close(read)
+            os.close(fd)
             _child(tasks, write)
         self.pid = pid
         os.close(write)
-        self._reader = threading.Thread(target=self._read, args=(read,), daemon=True)
-        self._reader.start()
+        self._reader = threading.Thread(target=self._read, args=(fd,), daemon=True)
+        if read:
+            self._reader.start()
 
     def _read(self, fd: int) -> None:
         with open(fd, "rb") as f:
@@ -133,6 +164,8 @@ class Background:
 
     def result(self, key: str) -> tuple[bool, Any]:
         """``(True, value)`` once the child sent ``key``; ``(False, None)`` if it never will."""
+        if self._reader.ident is None:
+            self._reader.start()
         with self._done:
             while key not in self._results and not self._finished:
                 self._done.wait()
@@ -144,7 +177,7 @@ class Background:
         """Wait until the child has sent all it will and ended, and reap it: then this
         process runs no thread of its own for it (and may fork again). The results stay
         for :meth:`result`."""
-        self._reader.join()
+        self._join()
         if self.pid:
             try:
                 os.waitpid(self.pid, 0)
@@ -163,6 +196,12 @@ class Background:
             except ChildProcessError:
                 pass
             self.pid = 0
+        self._join()
+
+    def _join(self) -> None:
+        """Wait for the reader thread (started by :func:`start_each` when not at once)."""
+        if self._reader.ident is None:  # never started: read what the child sent now
+            self._reader.start()
         self._reader.join()
 
     def __enter__(self) -> Background:
