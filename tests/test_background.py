@@ -185,6 +185,47 @@ def test_the_error_is_the_one_the_order_of_parts_meets_first():
     assert got == {"1": "configured", "2": "configured"}
 
 
+def test_the_robust_section_begun_by_children_is_the_same_and_its_error_comes_first():
+    """workers=2: the robust loops are certified by two children while this process
+    computes the baselines; the study is the one computed alone, and a failing robust
+    loop (raised only here) is the error, before a failing later part (the baselines)."""
+    got = run_python(
+        """
+        import json, os
+        import bwdesign.study.compute as C
+        import bwdesign.study.robust as R
+        from bwdesign.model.config import load_config
+        from bwdesign.study.result import CERTIFICATE_PARTS
+        cfg = load_config("configs/paper_simulation_corrected.toml")
+        parts = CERTIFICATE_PARTS | {"robust", "baselines"}
+        one = C.study(cfg, parts=parts)
+        two = C.study(cfg, parts=parts, workers=2)
+        out = {"same": one.to_dict() == two.to_dict()}
+        me, loop = os.getpid(), R.robust_loop
+        def here_only(*a, **k):
+            if os.getpid() != me:
+                raise RuntimeError("only here")
+            return loop(*a, **k)
+        R.robust_loop = here_only  # the children fail: every loop computed here
+        out["fallback"] = C.study(cfg, parts=parts, workers=2).to_dict() == one.to_dict()
+        def fail(*a, **k):
+            raise ValueError("robust")
+        def fail_baselines(r):
+            raise ValueError("baselines")
+        R.robust_loop = fail
+        C._COMPUTE["baselines"] = fail_baselines
+        for w in (1, 2):
+            try:
+                C.study(cfg, parts=parts, workers=w)
+            except ValueError as e:
+                out[str(w)] = str(e)
+        print(json.dumps(out))
+        """,
+        timeout=300,
+    )
+    assert got == {"same": True, "fallback": True, "1": "robust", "2": "robust"}
+
+
 def test_figures_drawn_on_two_processes_are_the_same_and_failures_drawn_here(tmp_path):
     got = run_python(
         f"""

@@ -31,7 +31,7 @@ from typing import Any
 
 from ..sim import kernel_process
 
-__all__ = ["Background", "start", "start_each", "available", "split"]
+__all__ = ["Background", "Pending", "Split", "start", "start_each", "available", "split"]
 
 
 def available() -> bool:
@@ -77,42 +77,73 @@ def split(tasks: Sequence[tuple[str, Callable[[], Any]]], *, here: bool = True) 
     turn, after the tasks before it; a task a child did not deliver (it raised there, or
     the child is gone) is computed here then.
     """
-    if len(tasks) < 2:
-        return [task() for _, task in tasks]
-    theirs, mine = list(tasks[1::2]), list(tasks[0::2])
-    other, second = start_each([theirs, [] if here else mine])
-    if other is None:
-        mine = list(tasks)
-        if second is not None:  # (no pipe for the first child): this process does the rest
-            second.close()
-            second = None
-    children = [c for c in (other, second) if c is not None]
-    done: dict[str, tuple[bool, Any]] = {}
-    try:
-        for key, task in mine if second is None else ():
-            try:
-                done[key] = (True, task())
-            except Exception as exc:  # noqa: BLE001 - raised in its turn below
-                done[key] = (False, exc)
-                if other is None:
-                    break  # working alone: the tasks after it are not needed
-        out = []
-        for key, task in tasks:
-            if key in done:
-                ok, value = done[key]
-                if not ok:
-                    raise value
-                out.append(value)
-                continue
-            got, value = False, None
-            for child in children:
-                if key in child.keys:
-                    got, value = child.result(key)
-            out.append(value if got else task())
-        return out
-    finally:
-        for child in children:
+    return Split(tasks, here=here).values()
+
+
+class Split:
+    """:func:`split` begun: with ``here=False`` the children are at work as it returns,
+    and :meth:`values` (called once) collects their values while this process went on
+    meanwhile; :meth:`close` stops them (the values not needed)."""
+
+    def __init__(self, tasks: Sequence[tuple[str, Callable[[], Any]]], *, here: bool) -> None:
+        self.tasks = list(tasks)
+        self.mine = list(tasks[0::2])
+        self.children: list[Background] = []
+        if len(self.tasks) < 2:
+            self.mine = self.tasks
+            return
+        other, second = start_each([self.tasks[1::2], [] if here else self.mine])
+        if other is None:
+            self.mine = self.tasks
+            if second is not None:  # (no pipe for the first child): this process does the rest
+                second.close()
+                second = None
+        self.children = [c for c in (other, second) if c is not None]
+        if second is not None:
+            self.mine = []
+
+    def values(self) -> list[Any]:
+        """The tasks' values in order (the error computing them in order meets first)."""
+        alone = not self.children
+        done: dict[str, tuple[bool, Any]] = {}
+        try:
+            for key, task in self.mine:
+                try:
+                    done[key] = (True, task())
+                except Exception as exc:  # noqa: BLE001 - raised in its turn below
+                    done[key] = (False, exc)
+                    if alone:
+                        break  # working alone: the tasks after it are not needed
+            out = []
+            for key, task in self.tasks:
+                if key in done:
+                    ok, value = done[key]
+                    if not ok:
+                        raise value
+                    out.append(value)
+                    continue
+                got, value = False, None
+                for child in self.children:
+                    if key in child.keys:
+                        got, value = child.result(key)
+                out.append(value if got else task())
+            return out
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stop and reap the children (if any still run)."""
+        for child in self.children:
             child.close()
+
+
+class Pending:
+    """A value being computed beside this process: :meth:`result` (called once) waits for
+    it and gives it, :meth:`close` gives it up (stopping what computes it)."""
+
+    def __init__(self, result: Callable[[], Any], close: Callable[[], None]) -> None:
+        self.result = result
+        self.close = close
 
 
 class Background:

@@ -43,7 +43,7 @@ from .result import (
     Synthesis,
     TierSynthesisStudy,
 )
-from .robust import robust_study
+from .robust import begin_robust_study
 from .sweep import check_stage_sweep, stage_sweep
 from .tiers import SEARCH_RTOL, synthesize_per_tier
 from .tracking import corner_tracking, input_limits, required_input, tracking_runs
@@ -147,7 +147,27 @@ class _Run:
             if self.beside is not None and part in self.beside.keys:
                 got, value = self.beside.result(part)
             self.done[part] = value if got else _COMPUTE[part](self)
-        return self.done[part]
+        value = self.done[part]
+        if isinstance(value, background.Pending):  # begun beside (begin): waited for now
+            del self.done[part]
+            value = self.done[part] = value.result()
+        return value
+
+    def begin(self, part: str) -> None:
+        """Begin ``part`` where it can be computed beside this process while this one goes
+        on (:data:`_BEGUN`; :meth:`compute` then waits for it), else compute it now."""
+        if part in _BEGUN and self.workers >= 2 and part not in self.done:
+            interrupts.check()
+            self.done[part] = _BEGUN[part](self)
+        else:
+            self.compute(part)
+
+    def give_up(self) -> None:
+        """Stop what computes the parts begun and not waited for (an error, or Ctrl-C)."""
+        for part, value in list(self.done.items()):
+            if isinstance(value, background.Pending):
+                del self.done[part]
+                value.close()
 
     def settle_before(self, failed: str, asked: frozenset[str]) -> None:
         """Compute the asked :data:`BESIDE` parts that :data:`PARTS` puts before ``failed``.
@@ -156,10 +176,10 @@ class _Run:
         that fails then raises only after those, so the error is the one computing the
         parts in :data:`PARTS`' order raises first.
         """
-        if self.beside is None:
-            return
-        for p in BESIDE:
-            if p in asked and PARTS.index(p) < PARTS.index(failed):
+        begun = [p for p, v in self.done.items() if isinstance(v, background.Pending)]
+        for p in PARTS:
+            before = PARTS.index(p) < PARTS.index(failed)
+            if before and p in asked and (p in begun or (self.beside and p in BESIDE)):
                 self.compute(p)
 
     def start_beside(self, asked: frozenset[str]) -> None:
@@ -366,20 +386,27 @@ def _robust_says(r: _Run) -> str | None:
     return _ROBUST_BOX
 
 
-def _robust(r: _Run) -> Any:
+def _robust(r: _Run, begin: bool = False) -> Any:
+    """The robust section; ``begin``: begun by two children (:meth:`_Run.begin`), its
+    value a :class:`~bwdesign.study.background.Pending` this process waits for later."""
     says = _robust_says(r)
     if says is None:
         return None
     tuning = r["tuning"]
     r.say(says)
-    try:
-        if r.workers >= 2 and r.beside is not None:
-            r.beside.wait()  # the second process done: this one may fork for the loops
-        return robust_study(r.config, tuning, r.udot_max, workers=r.workers)
-    except InputError:
-        if says == _ROBUST_BOX:
-            raise
-        return None  # a stage without a box: the nominal certificate alone, where it applies
+    if begin and r.beside is not None:
+        r.beside.wait()  # the second process done: this one may fork for the loops
+    begun = begin_robust_study(r.config, tuning, r.udot_max, workers=r.workers if begin else 1)
+
+    def section() -> Any:
+        try:
+            return begun.result()
+        except InputError:
+            if says == _ROBUST_BOX:
+                raise
+            return None  # a stage without a box: the nominal certificate alone, where it applies
+
+    return background.Pending(section, begun.close) if begin else section()
 
 
 def _firmware(r: _Run) -> Firmware:
@@ -425,6 +452,11 @@ def _baselines(r: _Run) -> Any:
         allow_unbounded=r.allow_unbounded,
     )
 
+
+#: Parts :meth:`_Run.begin` begins beside this process (``workers >= 2``): the robust
+#: section's loops, certified by two children while this process computes the parts
+#: after it (the baselines); then it waits for them.
+_BEGUN: dict[str, Callable[[_Run], Any]] = {"robust": lambda r: _robust(r, begin=True)}
 
 _COMPUTE: dict[str, Callable[[_Run], Any]] = {
     "plant": _plant,
@@ -578,14 +610,15 @@ def study(
     if workers >= 2:
         r.start_beside(asked)
     try:
-        for part in _order(r.beside is not None):
+        for part in _order(r.beside is not None) + PARTS:  # then: the parts begun
             if part in asked:
                 try:
-                    r.compute(part)
+                    r.begin(part) if part not in r.done else r.compute(part)
                 except Exception:
                     r.settle_before(part, asked)  # the error the order of PARTS meets first
                     raise
     finally:
+        r.give_up()
         if r.beside is not None:
             r.beside.close()
     if key is not None and set(r.done) - set(kept):

@@ -45,7 +45,13 @@ from ..sim.falsify import falsify
 from . import background
 from .result import RobustLoop, RobustStudy
 
-__all__ = ["robust_study", "robust_loop", "stage_disturbance", "ROBUST_OBSERVERS"]
+__all__ = [
+    "robust_study",
+    "begin_robust_study",
+    "robust_loop",
+    "stage_disturbance",
+    "ROBUST_OBSERVERS",
+]
 
 #: The falsifier's search beside each certificate (:func:`bwdesign.sim.falsify.falsify`).
 #: 64 interior plants and 6 rounds of 16 (224 plants with the 64 corners of a six-parameter
@@ -152,6 +158,15 @@ def robust_study(
     the same section, in about half the time where the loops weigh alike, and a box's
     solves, 50-70 MB each on the stack's, are not added to this process's memory).
     """
+    return begin_robust_study(config, tuning, udot_max, workers=workers).result()
+
+
+def begin_robust_study(
+    config: StageConfig, tuning: DigitalTuning, udot_max: float, *, workers: int = 1
+) -> background.Pending:
+    """:func:`robust_study` begun: with ``workers >= 2`` the children are at work when it
+    returns, while the caller goes on; its ``result()`` (called once) waits for them and
+    gives the section. Without children the section is computed then."""
     box = config.uncertainty
     has_box = box is not None and not box.undetermined()
     nominal = UncertaintyBox.from_dict({})
@@ -161,12 +176,17 @@ def robust_study(
         for name, b in boxes
         for obs in ROBUST_OBSERVERS
     ]
-    loops = background.split(tasks, here=False) if workers >= 2 else [t() for _, t in tasks]
-    n = len(ROBUST_OBSERVERS)
-    return RobustStudy(
-        udot_max=udot_max,
-        bounds=box.bounds(config.plant) if has_box else {},
-        loops=tuple(loops[:-n]),
-        disturbance=stage_disturbance(config),
-        nominal=tuple(loops[-n:]),
-    )
+    begun = background.Split(tasks, here=False) if workers >= 2 else None
+
+    def section() -> RobustStudy:
+        loops = begun.values() if begun is not None else [task() for _, task in tasks]
+        n = len(ROBUST_OBSERVERS)
+        return RobustStudy(
+            udot_max=udot_max,
+            bounds=box.bounds(config.plant) if has_box else {},
+            loops=tuple(loops[:-n]),
+            disturbance=stage_disturbance(config),
+            nominal=tuple(loops[-n:]),
+        )
+
+    return background.Pending(section, begun.close if begun is not None else lambda: None)
