@@ -1,11 +1,13 @@
 """Work done beside the main process: a forked child computes a list of tasks meanwhile.
 
-The report's slow parts that do not depend on each other (the per-tier synthesis and
-the robust section beside the tuning, the certificates, the tracking runs and the loop
-analyses: :data:`bwdesign.study.compute.BESIDE`; half the figures beside the other half)
-run on a second core: :class:`Background` forks a child that
-runs its tasks in order and sends each result back (pickled) as soon as it has it,
-while this process goes on with its own work and asks for a result when it needs it.
+The report's slow parts that do not depend on each other (the per-tier synthesis beside
+the certificates, the tuning and the tracking runs: :data:`bwdesign.study.compute.BESIDE`;
+the robust section's loops beside the baselines; half the figures beside the other
+half) run on a second core: :class:`Background` forks a child that runs its tasks in
+order and sends each result back (pickled) as soon as it has it, while this process goes
+on with its own work and asks for a result when it needs it. :class:`Split` shares a
+list of tasks between a child and this process, or between two children (forked
+together by :func:`start_each`) while this process goes on.
 
 The child is a copy of this process at the fork, so it computes exactly what this
 process would: a result it sends is the very value computed here. Anything that goes
