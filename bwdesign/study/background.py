@@ -27,7 +27,6 @@ import io
 import os
 import pickle
 import signal
-import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -51,19 +50,15 @@ def start_each(
     groups: Sequence[Sequence[tuple[str, Callable[[], Any]]]],
 ) -> list[Background | None]:
     """A :class:`Background` for each group of tasks (``None`` for an empty group, or all
-    ``None`` where no fork can be made). Every child is forked before any of them has a
-    reader thread here: a fork needs this process to run no other thread."""
+    ``None`` where no fork can be made)."""
     if not any(groups) or not available():
         return [None] * len(groups)
     out: list[Background | None] = []
     for tasks in groups:
         try:
-            out.append(Background(tasks, read=False) if tasks else None)
+            out.append(Background(tasks) if tasks else None)
         except OSError:  # no process or pipe to be had: the caller works alone
             out.append(None)
-    for child in out:
-        if child is not None:
-            child._reader.start()
     return out
 
 
@@ -151,6 +146,11 @@ class Pending:
 class Background:
     """A forked child running ``tasks`` (``(key, function)`` pairs) in order.
 
+    The results are read from the child's pipe when asked for (:meth:`result`), in this
+    thread: this process runs no thread for the child, so it may fork again meanwhile
+    (:func:`available`). A value larger than the pipe holds (64 KB) waits in the child
+    until it is asked for; the report's values are a few KB.
+
     Parameters
     ----------
     tasks : sequence of (str, callable)
@@ -158,13 +158,9 @@ class Background:
         The child stops at the first task that raises or whose value does not pickle.
     """
 
-    def __init__(
-        self, tasks: Sequence[tuple[str, Callable[[], Any]]], *, read: bool = True
-    ) -> None:
+    def __init__(self, tasks: Sequence[tuple[str, Callable[[], Any]]]) -> None:
         self.keys = tuple(k for k, _ in tasks)
         self._results: dict[str, Any] = {}
-        self._done = threading.Condition()
-        self._finished = False
         fd, write = os.pipe()
         try:
             pid = kernel_process.fork()  # streams flushed, SIGINT blocked in the child
@@ -177,46 +173,25 @@ class Background:
             _child(tasks, write)
         self.pid = pid
         os.close(write)
-        self._reader = threading.Thread(target=self._read, args=(fd,), daemon=True)
-        if read:
-            self._reader.start()
-
-    def _read(self, fd: int) -> None:
-        with open(fd, "rb") as f:
-            while True:
-                try:
-                    key, value = pickle.load(f)
-                except Exception:  # end of the pipe (the child is done or gone)
-                    break
-                with self._done:
-                    self._results[key] = value
-                    self._done.notify_all()
-        with self._done:
-            self._finished = True
-            self._done.notify_all()
+        self._pipe: io.BufferedReader | None = open(fd, "rb")  # closed by close()
 
     def result(self, key: str) -> tuple[bool, Any]:
         """``(True, value)`` once the child sent ``key``; ``(False, None)`` if it never will."""
-        if self._reader.ident is None:
-            self._reader.start()
-        with self._done:
-            while key not in self._results and not self._finished:
-                self._done.wait()
-            if key in self._results:
-                return True, self._results.pop(key)
+        while key not in self._results and self._pipe is not None:
+            try:
+                got, value = pickle.load(self._pipe)
+            except Exception:  # noqa: BLE001 - the end of the pipe (the child is done or gone)
+                self._end_pipe()
+                break
+            self._results[got] = value
+        if key in self._results:
+            return True, self._results.pop(key)
         return False, None
 
-    def wait(self) -> None:
-        """Wait until the child has sent all it will and ended, and reap it: then this
-        process runs no thread of its own for it (and may fork again). The results stay
-        for :meth:`result`."""
-        self._join()
-        if self.pid:
-            try:
-                os.waitpid(self.pid, 0)
-            except ChildProcessError:
-                pass
-            self.pid = 0
+    def _end_pipe(self) -> None:
+        if self._pipe is not None:
+            self._pipe.close()
+            self._pipe = None
 
     def close(self) -> None:
         """Stop the child (if still running) and reap it."""
@@ -229,13 +204,7 @@ class Background:
             except ChildProcessError:
                 pass
             self.pid = 0
-        self._join()
-
-    def _join(self) -> None:
-        """Wait for the reader thread (started by :func:`start_each` when not at once)."""
-        if self._reader.ident is None:  # never started: read what the child sent now
-            self._reader.start()
-        self._reader.join()
+        self._end_pipe()
 
     def __enter__(self) -> Background:
         return self

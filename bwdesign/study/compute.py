@@ -108,8 +108,8 @@ _TIERS = "synthesis per tier (the largest envelope synthesised gains reach)"
 
 #: Parts a second process computes beside the others (``study(workers=2)``): the per-tier
 #: synthesis reads the envelope alone. The robust section reads the tuning, so it is
-#: computed once the tuning is there, by two children forked then (once the first has
-#: ended), each certifying every second loop (robust_study(workers=)): the second process
+#: computed once the tuning is there, by two children forked then, each certifying
+#: every second loop (robust_study(workers=)): the second process
 #: computed the tuning once more when it had the section whole, and the section then
 #: took as long as the rest (stack_actuator_800hz: the report 14.1 s; 10.4 s split).
 BESIDE = ("tier_synthesis",)
@@ -394,8 +394,6 @@ def _robust(r: _Run, begin: bool = False) -> Any:
         return None
     tuning = r["tuning"]
     r.say(says)
-    if begin and r.beside is not None:
-        r.beside.wait()  # the second process done: this one may fork for the loops
     begun = begin_robust_study(r.config, tuning, r.udot_max, workers=r.workers if begin else 1)
 
     def section() -> Any:
