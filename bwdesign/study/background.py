@@ -6,8 +6,8 @@ the robust section's loops beside the baselines; half the figures beside the oth
 half) run on a second core: :class:`Background` forks a child that runs its tasks in
 order and sends each result back (pickled) as soon as it has it, while this process goes
 on with its own work and asks for a result when it needs it. :class:`Split` shares a
-list of tasks between a child and this process, or between two children (forked
-together by :func:`start_each`) while this process goes on.
+list of tasks between a child and this process, or between two children while this
+process goes on.
 
 The child is a copy of this process at the fork, so it computes exactly what this
 process would: a result it sends is the very value computed here. Anything that goes
@@ -32,7 +32,7 @@ from typing import Any
 
 from ..sim import kernel_process
 
-__all__ = ["Background", "Pending", "Split", "start", "start_each", "available", "split"]
+__all__ = ["Background", "Pending", "Split", "start", "available", "split"]
 
 
 def available() -> bool:
@@ -43,23 +43,12 @@ def available() -> bool:
 
 def start(tasks: Sequence[tuple[str, Callable[[], Any]]]) -> Background | None:
     """A :class:`Background` running ``tasks``, or ``None`` (no task, or no fork here)."""
-    return start_each([tasks])[0]
-
-
-def start_each(
-    groups: Sequence[Sequence[tuple[str, Callable[[], Any]]]],
-) -> list[Background | None]:
-    """A :class:`Background` for each group of tasks (``None`` for an empty group, or all
-    ``None`` where no fork can be made)."""
-    if not any(groups) or not available():
-        return [None] * len(groups)
-    out: list[Background | None] = []
-    for tasks in groups:
-        try:
-            out.append(Background(tasks) if tasks else None)
-        except OSError:  # no process or pipe to be had: the caller works alone
-            out.append(None)
-    return out
+    if not tasks or not available():
+        return None
+    try:
+        return Background(tasks)
+    except OSError:  # no process or pipe to be had: the caller works alone
+        return None
 
 
 def split(tasks: Sequence[tuple[str, Callable[[], Any]]], *, here: bool = True) -> list[Any]:
@@ -89,14 +78,12 @@ class Split:
         if len(self.tasks) < 2:
             self.mine = self.tasks
             return
-        other, second = start_each([self.tasks[1::2], [] if here else self.mine])
-        if other is None:
-            self.mine = self.tasks
-            if second is not None:  # (no pipe for the first child): this process does the rest
-                second.close()
-                second = None
+        other = start(self.tasks[1::2])
+        second = start(self.mine) if other is not None and not here else None
         self.children = [c for c in (other, second) if c is not None]
-        if second is not None:
+        if other is None:  # no child: this process computes every task
+            self.mine = self.tasks
+        elif second is not None:
             self.mine = []
 
     def values(self) -> list[Any]:
