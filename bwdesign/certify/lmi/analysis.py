@@ -7,6 +7,7 @@ Conventions: see the package docstring (:mod:`bwdesign.certify.lmi`).
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Any
 
 import cvxpy as cp
 import numpy as np
@@ -249,6 +250,32 @@ def lumped_margin(
 # -- robust invariant ellipsoid (bwdesign.certify.robust) ----------------------
 
 
+def _build_robust(n: int, m: int, k: int) -> Program:
+    """The program of :func:`robust_ellipsoid` for ``k`` blocks of ``n`` states and ``m``
+    inputs, every number a parameter: a contraction search solves it again and again on
+    the same blocks, and canonicalising it afresh took twice the solver's time."""
+    As = [cp.Parameter((n, n), name=f"A{i}") for i in range(k)]
+    Bs = [cp.Parameter((n, m), name=f"B{i}") for i in range(k)]
+    a = cp.Parameter(nonneg=True, name="a")
+    eps = cp.Parameter(nonneg=True, name="eps")
+    C = cp.Parameter((n, n), symmetric=True, name="C")
+    Q = cp.Variable((n, n), symmetric=True, name="Q")
+    lam = cp.Variable(m, nonneg=True, name="lam")
+    cons = [Q >> eps * np.eye(n), cp.sum(lam) <= 1.0]
+    for A, B in zip(As, Bs, strict=True):
+        M = cp.bmat(
+            [
+                [a * Q, np.zeros((n, m)), Q @ A.T],
+                [np.zeros((m, n)), (1 - a) * cp.diag(lam), B.T],
+                [A @ Q, B, Q],
+            ]
+        )
+        cons.append(sym(M) >> eps * np.eye(2 * n + m))
+    params = {p.name(): p for p in [*As, *Bs, a, eps, C]}
+    prob = cp.Problem(cp.Minimize(cp.sum(cp.multiply(C, Q))), cons)
+    return Program(prob, params, {"Q": Q, "lam": lam})
+
+
 def robust_ellipsoid(
     As: list[np.ndarray], Bs: list[np.ndarray], c: np.ndarray, *, a: float, eps: float = 1e-5
 ) -> LMISolution:
@@ -259,23 +286,18 @@ def robust_ellipsoid(
     (the congruence by ``diag(Q, I, Q)`` of the Schur form of
     ``V(z+) <= a V(z) + (1-a) sum lam_j w_j^2``, ``V = z'Q^-1 z``), ``sum(lam) <= 1``
     (inputs normalised to ``|w_j| <= 1``) and ``Q >= eps I``; minimises ``c'Qc``, the
-    squared peak of ``c'z`` on the ellipsoid. Variables ``Q`` (n x n), ``lam`` (m,).
+    squared peak of ``c'z`` on the ellipsoid (as ``<c c', Q>``). Variables ``Q``
+    (n x n), ``lam`` (m,). The program is built once per thread and shape
+    (:func:`~.core.cached_program`).
     """
     n = As[0].shape[0]
     m = Bs[0].shape[1]
-    Q = cp.Variable((n, n), symmetric=True)
-    lam = cp.Variable(m, nonneg=True)
-    cons = [Q >> eps * np.eye(n), cp.sum(lam) <= 1.0]
+    k = len(As)
+    prog = cached_program(f"robust_ellipsoid/{n}/{m}/{k}", lambda: _build_robust(n, m, k))
     cc = np.asarray(c, dtype=float).reshape(n)
-    for A, B in zip(As, Bs, strict=True):
-        M = cp.bmat(
-            [
-                [a * Q, np.zeros((n, m)), Q @ A.T],
-                [np.zeros((m, n)), (1 - a) * cp.diag(lam), B.T],
-                [A @ Q, B, Q],
-            ]
-        )
-        cons.append(sym(M) >> eps * np.eye(2 * n + m))
-    prob = cp.Problem(cp.Minimize(cc @ Q @ cc), cons)
+    values: dict[str, Any] = {"a": float(a), "eps": float(eps), "C": np.outer(cc, cc)}
+    for i, (A, B) in enumerate(zip(As, Bs, strict=True)):
+        values[f"A{i}"] = np.asarray(A, float)
+        values[f"B{i}"] = np.asarray(B, float)
     opts = {"chordal_decomposition_enable": False}
-    return solve(prob, {"Q": Q, "lam": lam}, first_only=True, options=opts)
+    return run_program(prog, values, first_only=True, options=opts)

@@ -261,9 +261,13 @@ def sym(X: cp.Expression) -> cp.Expression:
 
 
 def run_program(
-    prog: Program, values: Mapping[str, Any], *, first_only: bool = False
+    prog: Program,
+    values: Mapping[str, Any],
+    *,
+    first_only: bool = False,
+    options: Mapping[str, Any] | None = None,
 ) -> LMISolution:
     """Set the parameters of ``prog`` to ``values`` and :func:`solve` it."""
     for name, value in values.items():
         prog.params[name].value = value
-    return solve(prog.problem, prog.variables, first_only=first_only)
+    return solve(prog.problem, prog.variables, first_only=first_only, options=options)

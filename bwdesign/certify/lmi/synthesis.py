@@ -215,6 +215,41 @@ def lumped_sampled_synthesis(
     return solve(prob, {"Po": Po, "p": p, "Y": Y, "t": t})
 
 
+def _build_robust_observer(m_w: int, noisy: bool, k: int, disk: bool) -> Program:
+    """The program of :func:`robust_observer_synthesis` for ``m_w`` inputs (and the noise
+    when ``noisy``), ``k`` slopes and with or without the pole disk, every number a
+    parameter: the contraction search solves it a dozen times on the same data."""
+    m = m_w + int(noisy)
+    FD = [cp.Parameter((3, 3), name=f"FD{i}") for i in range(k)]
+    Bw = cp.Parameter((3, m_w), name="Bw")
+    F = cp.Parameter((3, 3), name="F")
+    cc = cp.Parameter((3, 1), name="c")
+    a = cp.Parameter(nonneg=True, name="a")
+    noise = cp.Parameter(nonneg=True, name="noise")
+    eps = cp.Parameter(nonneg=True, name="eps")
+    centre = cp.Parameter(name="centre")
+    radius = cp.Parameter(nonneg=True, name="radius")
+    P, Y = cp.Variable((3, 3), symmetric=True, name="P"), cp.Variable((3, 1), name="Y")
+    lam, g = cp.Variable(m, nonneg=True, name="lam"), cp.Variable(name="g")
+    C = np.array([[1.0, 0.0, 0.0]])
+    PB = P @ Bw - Y @ (C @ Bw)
+    if noisy:
+        PB = cp.hstack([PB, noise * Y])
+    epi = cp.bmat([[cp.reshape(g, (1, 1), order="C"), cc.T], [cc, P]])
+    cons = [P >> eps * I3, cp.sum(lam) <= 1.0, sym(epi) >> 0]
+    for D in FD:  # G F D_i = P (F D_i) - Y (C F D_i)
+        PA = P @ D - Y @ (C @ D)
+        Z = np.zeros((3, m))
+        M = cp.bmat([[a * P, Z, PA.T], [Z.T, (1 - a) * cp.diag(lam), PB.T], [PA, PB, P]])
+        cons.append(sym(M) >> eps * np.eye(6 + m))
+    if disk:
+        PM = P @ F - Y @ (C @ F) - centre * P
+        cons.append(sym(cp.bmat([[radius * P, PM.T], [PM, radius * P]])) >> eps * np.eye(6))
+    params = {p.name(): p for p in [*FD, Bw, F, cc, a, noise, eps, centre, radius]}
+    variables = {"P": P, "Y": Y, "lam": lam, "g": g}
+    return Program(cp.Problem(cp.Minimize(g), cons), params, variables)
+
+
 def robust_observer_synthesis(
     F: np.ndarray,
     Bw: np.ndarray,
@@ -234,27 +269,23 @@ def robust_observer_synthesis(
     ``sum(lam) <= 1``, ``P >= eps I``, optionally the nominal poles in the disk ``disk =
     (centre, r)`` (``[[r P, M'], [M, r P]] >= eps I``, ``M = G F - centre P``); minimises
     ``g >= c'P^-1 c`` (Schur), the squared peak of ``c'e`` on ``{e'Pe <= 1}``. Clarabel runs
-    without chordal decomposition (with it, these programs failed often).
+    without chordal decomposition (with it, these programs failed often). The program is
+    built once per thread and shape (:func:`~.core.cached_program`).
     """
     F, Bw, cc = np.asarray(F, float), np.asarray(Bw, float), np.asarray(c, float).reshape(3, 1)
-    m = Bw.shape[1] + int(noise > 0)
-    P, Y = cp.Variable((3, 3), symmetric=True), cp.Variable((3, 1))
-    lam, g = cp.Variable(m, nonneg=True), cp.Variable()
-    G = P - Y @ np.array([[1.0, 0.0, 0.0]])
-    PB = G @ Bw if noise <= 0 else cp.hstack([G @ Bw, float(noise) * Y])
-    epi = cp.bmat([[cp.reshape(g, (1, 1), order="C"), cc.T], [cc, P]])
-    cons = [P >> eps * I3, cp.sum(lam) <= 1.0, sym(epi) >> 0]
-    for r in rho:
-        PA = G @ F @ np.diag([1.0, 1.0, float(r)])
-        Z = np.zeros((3, m))
-        M = cp.bmat([[a * P, Z, PA.T], [Z.T, (1 - a) * cp.diag(lam), PB.T], [PA, PB, P]])
-        cons.append(sym(M) >> eps * np.eye(6 + m))
-    if disk is not None:
-        PM = G @ F - disk[0] * P
-        cons.append(sym(cp.bmat([[disk[1] * P, PM.T], [PM, disk[1] * P]])) >> eps * np.eye(6))
-    variables = {"P": P, "Y": Y, "lam": lam, "g": g}
+    noisy = noise > 0
+    k, m_w = len(rho), Bw.shape[1]
+    key = f"robust_observer/{m_w}/{int(noisy)}/{k}/{int(disk is not None)}"
+    prog = cached_program(key, lambda: _build_robust_observer(m_w, noisy, k, disk is not None))
+    values: dict[str, Any] = {
+        "Bw": Bw, "F": F, "c": cc, "a": float(a), "noise": float(noise) if noisy else 0.0,
+        "eps": float(eps), "centre": float(disk[0]) if disk else 0.0,
+        "radius": float(disk[1]) if disk else 0.0,
+    }  # fmt: skip
+    for i, r in enumerate(rho):
+        values[f"FD{i}"] = F @ np.diag([1.0, 1.0, float(r)])
     opts = {"chordal_decomposition_enable": False}
-    return solve(cp.Problem(cp.Minimize(g), cons), variables, first_only=True, options=opts)
+    return run_program(prog, values, first_only=True, options=opts)
 
 
 def _disk(X: Any, XA: Any, r: float | None, t: Any = 0.0) -> list[Any]:
