@@ -5,7 +5,7 @@ one array operation per term and time step: for the few dozen scenarios of a box
 (the report, the falsifier) the arrays are short and the interpreter's overhead per
 operation is the whole cost (about 25 us per time step, issue 28). The two functions here
 are that step written out once more as scalar code, compiled by numba and run scenario
-after scenario (the observer loop two scenarios side by side, each its own operations):
+after scenario (each scenario's state and sums in local scalars):
 :func:`observer_batch` (:func:`~bwdesign.sim.kernel.correct` and
 :func:`~bwdesign.sim.kernel.advance`) and :func:`baseline_batch`
 (:func:`~bwdesign.sim.kernel.advance_baseline`); :func:`observer_trace` runs the observer
@@ -42,9 +42,6 @@ __all__ = [
     "scaled_normals",
     "noise_rows",
 ]
-
-#: Scenarios stepped side by side in :func:`_observer_batch`.
-_LANES = 2
 
 
 @njit(cache=True, inline="always")
@@ -243,82 +240,64 @@ def _within(limit, vlim, x, h, ua):
 
 @njit(cache=True)
 def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dist, out):
-    # _LANES scenarios side by side, their states in the rows of S and their sums in A:
-    # the steps of different scenarios are independent, so the processor overlaps one's
-    # hysteresis jumps with the other's (36 instead of 40 ns a scenario-step); each
-    # scenario's own operations are the scalar loop's, in its order
+    # one scenario at a time, its state and sums in local scalars: the compiler keeps them
+    # in registers over the run (held in small arrays, every store could alias the noise
+    # and reference rows, so each was reloaded: 52 ns a scenario-step); the scenario's
+    # operations are the scalar loop's, in its order
     n = ref.shape[1] - 1
     ff, xd, win = ref[0], ref[1], ref[2]
     rows = dist.shape[0]
     sw, K, m, lw, lm = _loop_constants(model, gains, law, lim, flags, rows)
     limit, noisy = flags[4], flags[5] != 0.0
-    N = plant.shape[0]
-    # x1, x2, x3, xhat1, xhat2, xhat3, dhat, lumped, u_prev, u_a, q, the last input step
-    S = np.empty((_LANES, 12))
-    A = np.empty((_LANES, 12))  # out[:, 0:10], out[:, 19] and out[:, 20]
-    alive = np.empty(_LANES, np.bool_)
-    for i0 in range(0, N, _LANES):
-        nl = min(_LANES, N - i0)
-        for j in range(nl):
-            S[j, 0:6] = start[0:6]  # x1, x2, x3, xhat1, xhat2, xhat3
-            S[j, 6], S[j, 7] = 0.0, start[5]
-            S[j, 8], S[j, 9], S[j, 10], S[j, 11] = start[6], start[6], 0.0, 0.0
-            A[j, :] = 0.0
-            alive[j] = True
-            out[i0 + j, 10], out[i0 + j, 11] = 1.0, -1.0  # alive, no divergence step
+    for i in range(plant.shape[0]):
+        p, vlim = _plant_row(plant, i)
+        x = (start[0], start[1], start[2])
+        # xhat1, xhat2, xhat3, dhat, lumped
+        h = (start[3], start[4], start[5], 0.0, start[5])
+        up, ua, q = start[6], start[6], 0.0
+        last_du = 0.0  # the input's last step
+        sa = sq = mx = 0.0
+        s1 = s2 = s3 = m1 = m2 = m3 = 0.0
+        dum = sat = d2m = 0.0
+        out[i, 10], out[i, 11] = 1.0, -1.0  # alive, no divergence step
+        drow = i if rows > 1 else 0
         for k in range(n):
             inw = win[k] != 0.0
             # the input's last step is kept from the sample before the window on only
             track = inw or win[k + 1] != 0.0
-            live = 0
-            for j in range(nl):
-                if not alive[j]:
-                    continue
-                i = i0 + j
-                p, vlim = _plant_row(plant, i)
-                x = (S[j, 0], S[j, 1], S[j, 2])
-                up, ua, q = S[j, 8], S[j, 9], S[j, 10]
-                z = x[0] + noise[i, k] if noisy else x[0]
-                h = _correct(K, sw[0], z, S[j, 3], S[j, 4], S[j, 5], S[j, 6])
-                if inw:
-                    e = x[0] - xd[k]
-                    A[j, 0] += abs(e)
-                    A[j, 1] += e * e
-                    A[j, 2] = max(A[j, 2], abs(e))
-                    d1, d2, d3 = h[0] - x[0], h[1] - x[1], h[4] - x[2]
-                    A[j, 3] += d1 * d1
-                    A[j, 4] += d2 * d2
-                    A[j, 5] += d3 * d3
-                    A[j, 6] = max(A[j, 6], abs(d1))
-                    A[j, 7] = max(A[j, 7], abs(d2))
-                    A[j, 8] = max(A[j, 8], abs(d3))
-                d = dist[i if rows > 1 else 0, k] if rows > 0 else 0.0
-                r0, r1 = (ff[k], xd[k]), (ff[k + 1], xd[k + 1])
-                x, h, applied, ua, q = _advance(p, m, lw, lm, sw, x, h, up, ua, q, r0, r1, d)
-                if applied <= lw[5] or applied >= lw[6]:
-                    A[j, 10] += 1.0
-                du = applied - up
-                if inw:
-                    A[j, 9] = max(A[j, 9], abs(du))
-                    A[j, 11] = max(A[j, 11], abs(du - S[j, 11]))
-                if track:
-                    S[j, 11] = du
-                S[j, 0], S[j, 1], S[j, 2] = x
-                S[j, 3], S[j, 4], S[j, 5], S[j, 6], S[j, 7] = h
-                S[j, 8], S[j, 9], S[j, 10] = applied, ua, q
-                if _within(limit, vlim, x, h, ua):
-                    live += 1
-                else:
-                    _stop(out, i, k, x[0], x[1], x[2], h[0], h[1], h[4], ua)
-                    alive[j] = False
-            if live == 0:
+            z = x[0] + noise[i, k] if noisy else x[0]
+            h = _correct(K, sw[0], z, h[0], h[1], h[2], h[3])
+            if inw:
+                e = x[0] - xd[k]
+                sa += abs(e)
+                sq += e * e
+                mx = max(mx, abs(e))
+                d1, d2, d3 = h[0] - x[0], h[1] - x[1], h[4] - x[2]
+                s1 += d1 * d1
+                s2 += d2 * d2
+                s3 += d3 * d3
+                m1 = max(m1, abs(d1))
+                m2 = max(m2, abs(d2))
+                m3 = max(m3, abs(d3))
+            d = dist[drow, k] if rows > 0 else 0.0
+            r0, r1 = (ff[k], xd[k]), (ff[k + 1], xd[k + 1])
+            x, h, applied, ua, q = _advance(p, m, lw, lm, sw, x, h, up, ua, q, r0, r1, d)
+            if applied <= lw[5] or applied >= lw[6]:
+                sat += 1.0
+            du = applied - up
+            if inw:
+                dum = max(dum, abs(du))
+                d2m = max(d2m, abs(du - last_du))
+            if track:
+                last_du = du
+            up = applied
+            if not _within(limit, vlim, x, h, ua):
+                _stop(out, i, k, x[0], x[1], x[2], h[0], h[1], h[4], ua)
                 break
-        for j in range(nl):
-            i = i0 + j
-            for c in range(10):
-                out[i, c] = A[j, c]
-            out[i, 19] = A[j, 10]
-            out[i, 20] = A[j, 11]
+        out[i, 0], out[i, 1], out[i, 2] = sa, sq, mx
+        out[i, 3], out[i, 4], out[i, 5] = s1, s2, s3
+        out[i, 6], out[i, 7], out[i, 8] = m1, m2, m3
+        out[i, 9], out[i, 19], out[i, 20] = dum, sat, d2m
 
 
 def observer_trace(plant, consts, ref, noise, dist, trace):
