@@ -250,15 +250,18 @@ def lumped_margin(
 # -- robust invariant ellipsoid (bwdesign.certify.robust) ----------------------
 
 
-def _build_robust(n: int, m: int, k: int) -> Program:
-    """The program of :func:`robust_ellipsoid` for ``k`` blocks of ``n`` states and ``m``
-    inputs, every number a parameter: a contraction search solves it again and again on
-    the same blocks, and canonicalising it afresh took twice the solver's time."""
-    As = [cp.Parameter((n, n), name=f"A{i}") for i in range(k)]
-    Bs = [cp.Parameter((n, m), name=f"B{i}") for i in range(k)]
-    a = cp.Parameter(nonneg=True, name="a")
-    eps = cp.Parameter(nonneg=True, name="eps")
-    C = cp.Parameter((n, n), symmetric=True, name="C")
+#: A robust-ellipsoid program of at most this many block entries (``k n (n + m)``) is
+#: kept, per thread and shape, for the next solve (:func:`~.core.cached_program`): at 3
+#: states (the observer's certificate, 2 blocks) a re-solve then costs a fifth of a fresh
+#: one (4 against 20 ms). The loop's (7 states, 8 inputs) gain a tenth at best, and their
+#: parameter maps would stay in memory (9 MB at 2 blocks, 240 MB at 64): built each time.
+CACHED_ENTRIES = 200
+
+
+def _robust_problem(As: list, Bs: list, C: Any, a: Any, eps: Any) -> tuple[cp.Problem, dict]:
+    """The program of :func:`robust_ellipsoid` and its variables; ``As``, ``Bs``, ``C``
+    (``c c'``), ``a`` and ``eps`` numbers or cvxpy parameters (the same program)."""
+    n, m = As[0].shape[0], Bs[0].shape[1]
     Q = cp.Variable((n, n), symmetric=True, name="Q")
     lam = cp.Variable(m, nonneg=True, name="lam")
     cons = [Q >> eps * np.eye(n), cp.sum(lam) <= 1.0]
@@ -271,9 +274,20 @@ def _build_robust(n: int, m: int, k: int) -> Program:
             ]
         )
         cons.append(sym(M) >> eps * np.eye(2 * n + m))
-    params = {p.name(): p for p in [*As, *Bs, a, eps, C]}
-    prob = cp.Problem(cp.Minimize(cp.sum(cp.multiply(C, Q))), cons)
-    return Program(prob, params, {"Q": Q, "lam": lam})
+    return cp.Problem(cp.Minimize(cp.sum(cp.multiply(C, Q))), cons), {"Q": Q, "lam": lam}
+
+
+def _build_robust(n: int, m: int, k: int) -> Program:
+    """:func:`_robust_problem` for ``k`` blocks of ``n`` states and ``m`` inputs, every
+    number a parameter: a contraction search solves it again and again on the same
+    blocks, and canonicalising it afresh took most of the time of a small one."""
+    As = [cp.Parameter((n, n), name=f"A{i}") for i in range(k)]
+    Bs = [cp.Parameter((n, m), name=f"B{i}") for i in range(k)]
+    a = cp.Parameter(nonneg=True, name="a")
+    eps = cp.Parameter(nonneg=True, name="eps")
+    C = cp.Parameter((n, n), symmetric=True, name="C")
+    prob, variables = _robust_problem(As, Bs, C, a, eps)
+    return Program(prob, {p.name(): p for p in [*As, *Bs, a, eps, C]}, variables)
 
 
 def robust_ellipsoid(
@@ -287,17 +301,22 @@ def robust_ellipsoid(
     ``V(z+) <= a V(z) + (1-a) sum lam_j w_j^2``, ``V = z'Q^-1 z``), ``sum(lam) <= 1``
     (inputs normalised to ``|w_j| <= 1``) and ``Q >= eps I``; minimises ``c'Qc``, the
     squared peak of ``c'z`` on the ellipsoid (as ``<c c', Q>``). Variables ``Q``
-    (n x n), ``lam`` (m,). The program is built once per thread and shape
-    (:func:`~.core.cached_program`).
+    (n x n), ``lam`` (m,). A small program (:data:`CACHED_ENTRIES`) is built once per
+    thread and shape and kept.
     """
     n = As[0].shape[0]
     m = Bs[0].shape[1]
     k = len(As)
-    prog = cached_program(f"robust_ellipsoid/{n}/{m}/{k}", lambda: _build_robust(n, m, k))
+    As = [np.asarray(A, float) for A in As]
+    Bs = [np.asarray(B, float) for B in Bs]
     cc = np.asarray(c, dtype=float).reshape(n)
-    values: dict[str, Any] = {"a": float(a), "eps": float(eps), "C": np.outer(cc, cc)}
-    for i, (A, B) in enumerate(zip(As, Bs, strict=True)):
-        values[f"A{i}"] = np.asarray(A, float)
-        values[f"B{i}"] = np.asarray(B, float)
+    C = np.outer(cc, cc)
     opts = {"chordal_decomposition_enable": False}
+    if k * n * (n + m) > CACHED_ENTRIES:
+        prob, variables = _robust_problem(As, Bs, C, float(a), float(eps))
+        return solve(prob, variables, first_only=True, options=opts)
+    prog = cached_program(f"robust_ellipsoid/{n}/{m}/{k}", lambda: _build_robust(n, m, k))
+    values: dict[str, Any] = {"a": float(a), "eps": float(eps), "C": C}
+    for i, (A, B) in enumerate(zip(As, Bs, strict=True)):
+        values[f"A{i}"], values[f"B{i}"] = A, B
     return run_program(prog, values, first_only=True, options=opts)
