@@ -77,7 +77,10 @@ def row(config, tuning, label: str, box, observer: str, search_limit: float) -> 
         return out
     rate = rc.details["input_step_bound"] / rc.details["dt"]
     out.update(
-        rate_bound=rate, rate_proved=bool(rc.details["rate_proved"]), margin=rl.envelope / rate
+        rate_bound=rate,
+        rate_proved=bool(rc.details["rate_proved"]),
+        margin=rl.envelope / rate,
+        parts=rc.details.get("tracking_bound_parts"),
     )
     if took > search_limit:
         out["search"] = f"not searched (one certificate takes {took:.0f} s)"
@@ -110,6 +113,15 @@ def fmt(v, spec: str = ".4g") -> str:
     return format(v, spec)
 
 
+def largest(parts: dict | None) -> str:
+    """The largest part of a certified bound and its share: ``"hysteresis jump 88 %"``."""
+    total = sum(parts.values()) if parts else 0.0
+    if not total > 0:
+        return "-"
+    name = max(parts, key=parts.get)
+    return f"{name} {100 * parts[name] / total:.0f} %"
+
+
 def markdown(rows: dict[str, list[dict]]) -> str:
     lines = [
         "# Certified robust bounds beside the worst cases found (issue 27)",
@@ -121,6 +133,9 @@ def markdown(rows: dict[str, list[dict]]) -> str:
         "by `bwdesign.sim.falsify` (corners, interior plants, noise free); ratio = certified "
         "/ found (target <= 3). Rate: the certificate's own bound on the loop's input rate "
         "at that envelope; margin = envelope / rate bound (>= 1: the envelope is proved). "
+        "Largest part: the input whose part of the certified bound is largest "
+        "(`details[\"tracking_bound_parts\"]`, at the plant attaining the bound; '-' where "
+        "the ellipsoid's bound, which does not split, is the smaller). "
         "Search: `bwdesign.design.prove_rate` from that envelope. Computed by "
         "`analysis/robust_bounds.py` (`make paper`).",
         "",
@@ -129,15 +144,16 @@ def markdown(rows: dict[str, list[dict]]) -> str:
         lines += [
             f"## {stage}",
             "",
-            "| box | observer | certified | found | ratio | certify (s) | envelope (V/s) "
-            "| rate bound (V/s) | proved | margin | search |",
-            "|---|---|---|---|---|---|---|---|---|---|---|",
+            "| box | observer | certified | found | ratio | largest part | certify (s) "
+            "| envelope (V/s) | rate bound (V/s) | proved | margin | search |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for r in rs:
             lines.append(
                 f"| {r['box']} | {r['observer'].upper()} | "
                 f"{fmt(r['certified_um']) if r['holds'] else 'not certified: ' + r['status']} | "
-                f"{fmt(r['found_um'])} | {fmt(r['ratio'], '.3g')} | {r['seconds']:.1f} | "
+                f"{fmt(r['found_um'])} | {fmt(r['ratio'], '.3g')} | {largest(r.get('parts'))} | "
+                f"{r['seconds']:.1f} | "
                 f"{fmt(r['envelope'], '.5g')} | {fmt(r.get('rate_bound'), '.5g')} | "
                 f"{'yes' if r.get('rate_proved') else 'no'} | {fmt(r.get('margin'), '.3f')} | "
                 f"{r.get('search', '-')} |"

@@ -23,6 +23,7 @@ from bwdesign.errors import InputError
 from bwdesign.sim.falsify import falsify
 
 peak = importlib.import_module("bwdesign.certify.peak")
+robust_cover = importlib.import_module("bwdesign.certify.robust_cover")
 
 DT = 2e-4
 GAINS = (786.2, 28982.94, -782.0931942250238)  # the paper stage's digital tuning
@@ -94,6 +95,30 @@ def test_peak_bounds_cover_a_time_varying_slope_with_the_worst_signs():
             if k > 2000:
                 worst = np.maximum(worst, np.abs(rows @ z))
     assert np.all(worst <= bound)
+
+
+@pytest.mark.parametrize("varying", [False, True], ids=["fixed rho", "rank-one rho"])
+def test_the_parts_of_a_peak_bound_are_its_channels_and_sum_to_it(varying):
+    """peak_parts splits peak_bounds by input channel (zero where W_j = 0): alone, each
+    channel's bound is its part; together they sum to the bound."""
+    rng = np.random.default_rng(11)
+    n = 4
+    A0 = rng.normal(size=(n, n))
+    A0 *= 0.8 / np.max(np.abs(np.linalg.eigvals(A0)))
+    E = np.outer(rng.normal(size=n), rng.normal(size=n)) * 0.05
+    B = rng.normal(size=(n, 3))
+    rhos = (0.9, 1.0) if varying else (1.0,)
+    blocks = [(A0 + (r - 0.95) * E, B) for r in rhos]
+    W = np.array([1.0, 0.0, 0.5])
+    rows = np.eye(n)[:2]
+    bound = peak.peak_bounds(blocks, rhos, W, rows)
+    parts = peak.peak_parts(blocks, rhos, W, rows)
+    assert parts.shape == (2, 3) and np.all(parts[:, 1] == 0) and np.all(parts >= 0)
+    np.testing.assert_allclose(parts.sum(axis=1), bound, rtol=1e-12)
+    if not varying:  # linear: a channel alone is its part (the small gain couples them)
+        for j in (0, 2):
+            alone = peak.peak_bounds(blocks, rhos, W * (np.arange(3) == j), rows)
+            np.testing.assert_allclose(alone, parts[:, j], rtol=1e-12)
 
 
 @pytest.fixture(scope="module")
@@ -179,6 +204,29 @@ def test_a_second_difference_envelope_bounds_the_jump_where_the_input_turns():
         with pytest.raises(InputError, match="uddot_max"):
             certify_robust(loop, uddot_max=bad, **kw)
     assert second_envelope(float("nan")) is None and second_envelope(0.0) is None
+
+
+def _parts_sum_to_the_bound(rc):
+    d = rc.details
+    assert rc.holds and d["bound_method"] == "peak-to-peak", rc.status
+    parts = d["tracking_bound_parts"]
+    assert set(parts) == {*robust_cover.PARTS, "quasi-static"}
+    assert all(v >= 0 for v in parts.values())
+    assert sum(parts.values()) == pytest.approx(rc.tracking_bound, rel=1e-9)
+    assert parts["hysteresis jump"] > 0 and parts["jump model error"] > 0
+    return parts
+
+
+def test_the_certificate_says_what_its_tracking_bound_is_made_of(certified):
+    """details["tracking_bound_parts"]: the inputs' parts of the peak-to-peak tracking
+    bound at the plant attaining it, summing to the bound (PHSO, noise free: no noise
+    part; the PHDO with noise at 0.01 um: a noise part)."""
+    assert _parts_sum_to_the_bound(certified[0])["sensor noise"] == 0
+    loop = _loop(preset("paper_experiment"))
+    loop = loop.replace(observer=ObserverSpec.of("phdo", (GAINS[0], GAINS[1], 0.0, GAINS[2])))
+    box = UncertaintyBox.from_dict({"alpha": {"rel": 0.05}})
+    rc = certify_robust(loop, uncertainty=box, udot_max=UDOT, reference=REF, noise_max=0.01)
+    assert _parts_sum_to_the_bound(rc)["sensor noise"] > 0
 
 
 def test_the_verdict_says_whether_the_rate_envelope_is_proved(certified):

@@ -571,6 +571,13 @@ def test_report_includes_the_configs_sweep(tmp_path, capsys):
     assert cert["sweep"]["samples"] == 4 and set(cert["sweep"]["summary"]) == {"phso", "eso"}
     assert list(cert["sweep"]["bounds"]) == ["a1", "alpha", "beta"]
     assert (out / "figures" / "sweep_histograms.png").exists()
+    # the robust section says what its bounds are made of, as certificate.json has them
+    for rl in cert["robust"]["observers"].values():
+        parts = rl["certificate"]["details"]["tracking_bound_parts"]
+        assert sum(parts.values()) == pytest.approx(rl["tracking_bound"], rel=1e-9)
+        top = max(parts, key=parts.get)
+        share = 100 * parts[top] / sum(parts.values())
+        assert f"{rl['observer'].upper()}: {top} {share:.1f} %" in md
 
 
 @pytest.mark.parametrize(

@@ -33,7 +33,7 @@ import warnings
 import numpy as np
 from scipy.linalg import LinAlgWarning, matrix_balance, solve_discrete_lyapunov
 
-__all__ = ["l1_norms", "peak_bounds", "decreasing_lyapunov"]
+__all__ = ["l1_norms", "peak_bounds", "peak_parts", "decreasing_lyapunov"]
 
 #: Stop the sums once the rest is below this share of them.
 _REST = 1e-6
@@ -123,20 +123,60 @@ def peak_bounds(
     ``blocks``: ``(A, B)`` at each end of ``rhos`` (one block: ``rho`` fixed); ``W``
     the bounds of ``B``'s columns. ``None``: unstable, or the small gain fails.
     """
+    t = _terms(blocks, rhos, W, rows)
+    if t is None:
+        return None
+    _, W, L1, rank_one = t
+    if rank_one is None:
+        return L1 @ W
+    g, vs, gain = rank_one
+    eta = (L1[-1, :-1] @ W + np.abs(vs) @ W) / (1 - gain)
+    out = L1[:-1, :-1] @ W + g * L1[:-1, -1] * eta
+    return out if np.all(np.isfinite(out)) else None
+
+
+def peak_parts(
+    blocks: list[tuple[np.ndarray, np.ndarray]],
+    rhos: tuple[float, ...],
+    W: np.ndarray,
+    rows: np.ndarray,
+) -> np.ndarray | None:
+    """What each input channel adds to :func:`peak_bounds`: ``(rows, len(W))``, each row
+    summing to that bound (to rounding; both are linear in ``W``), 0 where ``W_j = 0``.
+    Where the small gain acts, channel ``j``'s part includes its share of ``eta``."""
+    t = _terms(blocks, rhos, W, rows)
+    if t is None:
+        return None
+    keep, Wk, L1, rank_one = t
+    out = np.zeros((rows.shape[0], len(keep)))
+    if rank_one is None:
+        out[:, keep] = L1 * Wk
+        return out
+    g, vs, gain = rank_one
+    eta = (L1[-1, :-1] + np.abs(vs)) * Wk / (1 - gain)  # channel j's share of eta
+    out[:, keep] = L1[:-1, :-1] * Wk + g * L1[:-1, -1][:, None] * eta[None, :]
+    return out if np.all(np.isfinite(out)) else None
+
+
+def _terms(blocks, rhos, W, rows):
+    """The l1 norms both functions above combine: ``(keep, W[keep], L1, rank_one)``,
+    ``rank_one = (g, v_s, gain)`` where ``rho`` varies (``L1`` then has the ``v`` row and
+    the ``u`` column last), None for a fixed ``rho``; None: unstable, not rank one, or
+    the small gain fails."""
     keep = W > 0
     W = W[keep]
     A_c = np.mean([A for A, _ in blocks], axis=0)
     B_c = np.mean([B[:, keep] for _, B in blocks], axis=0)
     if len(blocks) == 1:
         L1 = l1_norms(A_c, B_c, rows)
-        return None if L1 is None else L1 @ W
+        return None if L1 is None else (keep, W, L1, None)
     (A0, B0), (A1, B1) = blocks
     span = rhos[1] - rhos[0]
     D = np.hstack([A1 - A0, (B1 - B0)[:, keep]]) / span
     U, S, Vt = np.linalg.svd(D)
     if S[0] == 0:
         L1 = l1_norms(A_c, B_c, rows)
-        return None if L1 is None else L1 @ W
+        return None if L1 is None else (keep, W, L1, None)
     if S[1] > 1e-9 * S[0]:  # not rank one: no scalar small gain here
         return None
     n = A_c.shape[0]
@@ -148,6 +188,4 @@ def peak_bounds(
     gain = g * L1[-1, -1]
     if not gain < 1:
         return None
-    eta = (L1[-1, :-1] @ W + np.abs(vs) @ W) / (1 - gain)
-    out = L1[:-1, :-1] @ W + g * L1[:-1, -1] * eta
-    return out if np.all(np.isfinite(out)) else None
+    return keep, W, L1, (g, vs, gain)

@@ -150,7 +150,7 @@ from ..validate import NONNEGATIVE, POSITIVE, UDOT_MAX, below_nyquist, real
 from .checks import rho_interval
 from .ellipsoid import copy_error_bound, jump_mismatch
 from .results import RobustCertificate
-from .robust_cover import cover_inputs, input_step_bound, plant_peaks
+from .robust_cover import cover_inputs, input_step_bound, plant_peaks, tracking_parts
 from .robust_ellipsoid import Ellipsoids, contraction
 
 __all__ = ["RobustCertificate", "certify_robust"]
@@ -691,12 +691,16 @@ def _conclude(
             bounds[i] = peak(i)
     method, slow_jump = "ellipsoid", None
     half = (st.rhos[-1] - st.rhos[0]) / 2
-    for (hb2, _, _), dd, l1 in peaks if holds else ():
+    parts = None  # the tracking bound's: (its cover's W, the plant's data) where peak-to-peak
+    for (hb2, W, _), dd, l1 in peaks if holds else ():
         # the per-plant peak-to-peak bounds (.peak), where smaller
         for i in range(3):
-            b = max(float(p[i]) + float(d["static"][i]) for p, d in zip(l1, dd, strict=True))
+            per = [float(p[i]) + float(d["static"][i]) for p, d in zip(l1, dd, strict=True)]
+            b = max(per)
             if bounds[i] is None or b < bounds[i]:
                 bounds[i], method = b, "peak-to-peak"
+                if i == 0:
+                    parts = (W, dd[int(np.argmax(per))])
                 if i == 0 and np.any(dd[0]["Gie"]):  # the jump a slow input: its change
                     slow_jump = max(d["jchan"] for d in dd)
                 elif i == 0:
@@ -767,6 +771,9 @@ def _conclude(
             # the tracking bound's: the jump as a slow input (its change bounded) or a fast one
             "jump_input": "fast" if slow_jump is None else "slow",
             "jump_change_bound": slow_jump,
+            # what each input adds to the tracking bound at the plant attaining it
+            # (peak-to-peak; None for the ellipsoid's, which does not split)
+            "tracking_bound_parts": tracking_parts(st, parts[1], parts[0]) if parts else None,
         },
         **base,
     )

@@ -26,10 +26,18 @@ import numpy as np
 from ..model.reference_cover import sup_abs
 from ..model.references import Reference
 from .ellipsoid import disturbance_remainder
-from .peak import l1_norms, peak_bounds
+from .peak import l1_norms, peak_bounds, peak_parts
 from .response import response_sups
 
-__all__ = ["cover_inputs", "deterministic", "input_step_bound", "plant_peaks", "copy_level"]
+__all__ = [
+    "cover_inputs",
+    "deterministic",
+    "input_step_bound",
+    "plant_peaks",
+    "copy_level",
+    "tracking_parts",
+    "PARTS",
+]
 
 
 def cover_inputs(
@@ -179,16 +187,7 @@ def plant_peaks(st: Any, data: list[dict], W: np.ndarray) -> list[np.ndarray] | 
     either end of ``rho``. None if any plant has none (then the ellipsoid's stand)."""
     n, out = st.n, []
     for d in data:
-        A_c = np.mean([A for A, _ in d["blocks"]], axis=0)
-        rows = np.array(
-            [
-                *st.statics,
-                (A_c - np.eye(n)).T @ st.cu,
-                d["E"].T @ st.cu if d["E"] is not None else np.zeros(n),
-            ]
-        )
-        Wp = W.copy()  # this plant's own channel bounds
-        Wp[: n + 2] = np.concatenate([d["chan"], [d["jchan"], d["hyst"][2]]])
+        rows, Wp = _plant_rows(st, d, W)
         pb = peak_bounds(d["blocks"], st.rhos, Wp, rows)
         if pb is None:
             return None
@@ -197,6 +196,56 @@ def plant_peaks(st: Any, data: list[dict], W: np.ndarray) -> list[np.ndarray] | 
             pb[:3] += smaller - step
         out.append(pb)
     return out
+
+
+#: The names of the tracking bound's parts (:func:`tracking_parts`), by input channel.
+PARTS = (
+    "reference and rho coupling",
+    "hysteresis jump",
+    "jump model error",
+    "sensor noise",
+    "disturbance step",
+    "disturbance within sample",
+)
+
+
+def tracking_parts(st: Any, d: dict, W: np.ndarray) -> dict[str, float] | None:
+    """What each input adds to one plant's peak-to-peak tracking bound (:func:`plant_peaks`
+    of ``d``, plus its quasi-static part): a dict of :data:`PARTS` (length unit) and
+    ``"quasi-static"``. The first is the state channels (the reference terms' increments
+    or, with the exact cover, none of them, and every ``rho`` coupling); the jump's is its
+    change where it is a slow input. The parts sum to the bound (to rounding: it is
+    linear in the channels' bounds)."""
+    n = st.n
+    rows, Wp = _plant_rows(st, d, W)
+    # all of plant_peaks' rows: the sums stop where every row's rest is small (.peak)
+    parts = peak_parts(d["blocks"], st.rhos, Wp, rows)
+    if parts is None:
+        return None
+    p = parts[0]
+    if d["E"] is None and Wp[n + 1] > 0:  # PHDO: dh's smaller treatment, as plant_peaks
+        step, smaller = copy_level(d, Wp[n + 1], rows[:3])
+        p[n + 1] += smaller[0] - step[0]
+    groups = (p[:n].sum(), p[n], p[n + 1], p[n + 2], p[n + 3], p[n + 4 :].sum())
+    out = {name: float(v) for name, v in zip(PARTS, groups, strict=True)}
+    out["quasi-static"] = float(d["static"][0])
+    return out
+
+
+def _plant_rows(st: Any, d: dict, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows :func:`plant_peaks` bounds for plant ``d`` and its own channel bounds."""
+    n = st.n
+    A_c = np.mean([A for A, _ in d["blocks"]], axis=0)
+    rows = np.array(
+        [
+            *st.statics,
+            (A_c - np.eye(n)).T @ st.cu,
+            d["E"].T @ st.cu if d["E"] is not None else np.zeros(n),
+        ]
+    )
+    Wp = W.copy()
+    Wp[: n + 2] = np.concatenate([d["chan"], [d["jchan"], d["hyst"][2]]])
+    return rows, Wp
 
 
 def copy_level(d: dict, dh: float, rows: np.ndarray) -> np.ndarray:

@@ -109,6 +109,24 @@ def robust_section(doc: Document, study: Study) -> None:
             "`bwdesign synthesize --plant FILE --robust` searches gains and laws against the "
             "box for the smallest certified bound."
         )
+    made = [m for lp in (*loops, *part.nominal) if (m := _made_of(lp))]
+    if made:
+        doc.para(
+            "What each certified tracking bound is made of (the inputs' parts of the "
+            "peak-to-peak bound at the plant attaining it, largest first; "
+            "`certificate.json`: `tracking_bound_parts`): " + "; ".join(made) + "."
+        )
+
+
+def _made_of(lp) -> str | None:
+    """``"PHSO: hysteresis jump 99.9 %, ..."``: the parts of 1 % or more of the bound."""
+    parts = lp.certificate.details.get("tracking_bound_parts") if lp.certificate.holds else None
+    total = sum(parts.values()) if parts else 0.0
+    if not total > 0:
+        return None
+    tag = " (nominal)" if lp.certificate.n_vertices == 1 and not lp.certificate.n_interior else ""
+    big = sorted(((v / total, k) for k, v in parts.items() if v >= 0.01 * total), reverse=True)
+    return f"{lp.observer.upper()}{tag}: " + ", ".join(f"{k} {100 * r:.1f} %" for r, k in big)
 
 
 _HEADER = ["observer", "steady error", "certified bound", "worst found", "certified / found"]
