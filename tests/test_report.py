@@ -372,3 +372,16 @@ def test_tier_rows_when_synthesis_says_no(monkeypatch):
     assert 50.0 / (1 + tiers.SEARCH_RTOL) <= sec.requested < 50.0  # the bisection's edge
     assert sec.envelope == 50.0 + sec.requested  # the best of the feasible syntheses
     assert sec.to_dict()["envelope_unbounded"] is False
+
+
+def test_the_nominal_certificate_says_what_its_bound_is_made_of(built):
+    """A stage without [uncertainty]: the nominal section names the parts of each bound,
+    the certificate.json's ``tracking_bound_parts`` (paper_experiment: the jump)."""
+    md, cert = built.md, built.cert
+    for rl in cert["robust"]["nominal"].values():
+        parts = rl["certificate"]["details"]["tracking_bound_parts"]
+        total = sum(parts.values())
+        assert total == pytest.approx(rl["tracking_bound"], rel=1e-9)
+        top = max(parts, key=parts.get)
+        assert top == "hysteresis jump"
+        assert f"{rl['observer'].upper()} (nominal): {top} {100 * parts[top] / total:.1f} %" in md

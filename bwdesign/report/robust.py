@@ -109,7 +109,11 @@ def robust_section(doc: Document, study: Study) -> None:
             "`bwdesign synthesize --plant FILE --robust` searches gains and laws against the "
             "box for the smallest certified bound."
         )
-    made = [m for lp in (*loops, *part.nominal) if (m := _made_of(lp))]
+    _made_of_para(doc, (*loops, *part.nominal))
+
+
+def _made_of_para(doc: Document, loops) -> None:
+    made = [m for lp in loops if (m := _made_of(lp))]
     if made:
         doc.para(
             "What each certified tracking bound is made of (the inputs' parts of the "
@@ -168,3 +172,4 @@ def _nominal_section(doc: Document, study: Study) -> None:
     for lp in part.nominal:
         doc.para(f"{lp.observer.upper()}: verdict: {lp.certificate.status}.")
     doc.table(_HEADER, _rows(part.nominal, lu, " (nominal)"))
+    _made_of_para(doc, part.nominal)
