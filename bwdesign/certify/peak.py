@@ -64,15 +64,19 @@ def l1_norms(A: np.ndarray, B: np.ndarray, L: np.ndarray) -> np.ndarray | None:
     total = np.zeros((L.shape[0], B.shape[1]))
     row = L.copy()
     k = 0
-    # powers A^1..A^CHUNK once, then blocks of rows advanced CHUNK steps at a time
-    pw = [np.eye(A.shape[0])]
-    for _ in range(_CHUNK - 1):
-        pw.append(pw[-1] @ A)
-    pw = np.array(pw)  # (CHUNK, n, n)
-    A_chunk = pw[-1] @ A
-    PB = pw @ B  # (CHUNK, n, cols)
+    # powers A^0..A^(CHUNK-1) by doubling (log2(CHUNK) batched products), then blocks of
+    # rows advanced CHUNK steps at a time; one block's terms are one matrix product
+    n, cols = B.shape
+    pw = np.empty((_CHUNK, n, n))
+    pw[0] = np.eye(n)
+    step, h = A, 1
+    while h < _CHUNK:
+        pw[h : 2 * h] = pw[:h] @ step
+        step, h = step @ step, 2 * h
+    A_chunk = step  # A^CHUNK
+    PB = np.ascontiguousarray((pw @ B).transpose(1, 0, 2)).reshape(n, _CHUNK * cols)
     while True:
-        total += np.abs(np.einsum("ri,kic->krc", row, PB)).sum(axis=0)
+        total += np.abs(row @ PB).reshape(-1, _CHUNK, cols).sum(axis=1)
         k += _CHUNK
         row = row @ A_chunk
         rest = (r**k / (1 - r)) * np.outer(gl, gb)
