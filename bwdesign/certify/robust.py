@@ -656,6 +656,27 @@ def _rate_clause(step: float, st: _Setup, dt: float, unit: str) -> str:
     return out
 
 
+def _status(st: _Setup, base: dict[str, Any], bounds: list, decay: float, step, dt: float) -> str:
+    """The status line of a certificate that holds: its plants, bounds, rate and disturbance."""
+    status = (
+        (
+            f"certified over {base['n_vertices']} corners (+{base['n_interior']} interior points)"
+            if base["n_vertices"] > 1 or base["n_interior"]
+            else "certified for the nominal plant"
+        )
+        + f": steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
+        f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s, "
+        + _rate_clause(step, st, dt, st.params.input_unit)
+    )
+    if st.dist != (0.0, 0.0):
+        unit = st.params.input_unit
+        status += (
+            f", and an input disturbance |d| <= {st.dist[0]:.4g} {unit}, |d'| <= "
+            f"{st.dist[1]:.4g} {unit}/s on the plant"
+        )
+    return status
+
+
 def _conclude(
     st: _Setup,
     ell: Ellipsoids,
@@ -673,7 +694,7 @@ def _conclude(
     ``peaks``: ``(cover, data, per-plant peak-to-peak bounds)`` of every cover that has them.
     """
     sol, av = solved
-    params, lp = st.params, st.lp
+    lp = st.lp
     margins, peak, dyn = ell.check(sol, av, st, data)
     holds = all(m.passed for m in margins)
     step = input_step_bound(st, data, lambda v, _: dyn(v), hb, noise_max) if holds else None
@@ -718,29 +739,14 @@ def _conclude(
     decay = -math.log(av) / (2 * dt)
     worst = max(margins, key=lambda m: m.value - m.limit)
     udot_max = st.udot_max
-    if holds:
-        status = (
-            (
-                f"certified over {base['n_vertices']} corners (+{base['n_interior']} interior "
-                "points)"
-                if base["n_vertices"] > 1 or base["n_interior"]
-                else "certified for the nominal plant"
-            )
-            + f": steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
-            f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s, "
-            + _rate_clause(step, st, dt, params.input_unit)
-        )
-        if st.dist != (0.0, 0.0):
-            unit = params.input_unit
-            status += (
-                f", and an input disturbance |d| <= {st.dist[0]:.4g} {unit}, |d'| <= "
-                f"{st.dist[1]:.4g} {unit}/s on the plant"
-            )
-    else:
-        status = (
+    status = (
+        _status(st, base, bounds, decay, step, dt)
+        if holds
+        else (
             f"not certified: the solver's P failed the outside check ({worst.name}: "
             f"min eig {-worst.value:.3g})"
         )
+    )
     return RobustCertificate(
         holds=holds,
         status=status,
