@@ -5,8 +5,9 @@ resident memory (LLVM's library alone about 95 MB), in whichever process runs th
 command that needs a few batched runs beside scipy, python-control, cvxpy and matplotlib
 (the report: its falsifier and baseline comparison) would carry both. :func:`running`
 forks a small process at the start of such a command, while only the standard library
-is loaded; the first batch makes *that* process import numpy and the kernels
-(:mod:`bwdesign.sim.compiled`), and every batch of the command is run there: the arrays
+is loaded; *that* process imports numpy and the kernels (:mod:`bwdesign.sim.compiled`)
+at once, on the core the command leaves idle while it imports the rest, and every batch
+of the command is run there: the arrays
 go through a socket (pickled), the kernel runs on them, the array it writes comes back.
 
 The kernel process runs the very code this process would (the same compiled functions
