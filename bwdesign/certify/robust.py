@@ -656,8 +656,11 @@ def _rate_clause(step: float, st: _Setup, dt: float, unit: str) -> str:
     return out
 
 
-def _status(st: _Setup, base: dict[str, Any], bounds: list, decay: float, step, dt: float) -> str:
+def _status(
+    st: _Setup, base: dict[str, Any], bounds: list, decay: float, step: float, dt: float
+) -> str:
     """The status line of a certificate that holds: its plants, bounds, rate and disturbance."""
+    unit = st.params.input_unit
     status = (
         (
             f"certified over {base['n_vertices']} corners (+{base['n_interior']} interior points)"
@@ -666,10 +669,9 @@ def _status(st: _Setup, base: dict[str, Any], bounds: list, decay: float, step, 
         )
         + f": steady |x1 - x_d| <= {bounds[0]:.4g}, |x1hat - x1| <= {bounds[1]:.4g}, "
         f"|x3hat - x3| <= {bounds[2]:.4g} (length unit), convergence >= {decay:.4g} 1/s, "
-        + _rate_clause(step, st, dt, st.params.input_unit)
+        + _rate_clause(step, st, dt, unit)
     )
     if st.dist != (0.0, 0.0):
-        unit = st.params.input_unit
         status += (
             f", and an input disturbance |d| <= {st.dist[0]:.4g} {unit}, |d'| <= "
             f"{st.dist[1]:.4g} {unit}/s on the plant"

@@ -7,8 +7,8 @@ command that needs a few batched runs beside scipy, python-control, cvxpy and ma
 forks a small process at the start of such a command, while only the standard library
 is loaded; *that* process imports numpy and the kernels (:mod:`bwdesign.sim.compiled`)
 at once, on the core the command leaves idle while it imports the rest, and every batch
-of the command is run there: the arrays
-go through a socket (pickled), the kernel runs on them, the array it writes comes back.
+of the command is run there: the arrays go through a socket (pickled), the kernel runs
+on them, the array it writes comes back.
 
 The kernel process runs the very code this process would (the same compiled functions
 on the same arrays, read from numba's same cache), so the results are the same to the
