@@ -288,9 +288,49 @@ def robust_observer_synthesis(
     return run_program(prog, values, first_only=True, options=opts)
 
 
-def _disk(X: Any, XA: Any, r: float | None, t: Any = 0.0) -> list[Any]:
+def _disk(X: Any, XA: Any, r: Any, t: Any = 0.0) -> list[Any]:
     """``[[-r X, X A], [A' X, -r X]] <= -t I``: the eigenvalues of ``A`` in ``|s| < r``."""
     return [] if r is None else [sym(cp.bmat([[-r * X, XA], [XA.T, -r * X]])) << -t * np.eye(6)]
+
+
+def _scaled_params(with_disk: bool) -> dict[str, cp.Parameter]:
+    """The parameters the Theorem 1 and lipschitz programs share (scaled coordinates)."""
+    params = {
+        "Ahat": cp.Parameter((3, 3), name="Ahat"),
+        "mu": cp.Parameter(nonneg=True, name="mu"),
+        "lmax": cp.Parameter(nonneg=True, name="lmax"),
+    }
+    if with_disk:
+        params["radius"] = cp.Parameter(nonneg=True, name="radius")
+    return params
+
+
+def _scaled_values(Ahat: np.ndarray, mu: float, lmax: float, radius: float | None) -> dict:
+    values: dict[str, Any] = {
+        "Ahat": np.asarray(Ahat, float).reshape(3, 3),
+        "mu": float(mu),
+        "lmax": float(lmax),
+    }
+    if radius is not None:
+        values["radius"] = float(radius)
+    return values
+
+
+def _build_theorem1(with_disk: bool) -> Callable[[], Program]:
+    def build() -> Program:
+        params = _scaled_params(with_disk)
+        X = cp.Variable((3, 3), symmetric=True, name="X")
+        Z = cp.Variable((3, 1), name="Z")
+        p = cp.Variable(name="p")
+        XA = X @ params["Ahat"] - Z @ np.array([[1.0, 0.0, 0.0]])
+        He = XA + XA.T + 2 * params["mu"] * X
+        cons = [X >> (p / 100.0) * I3, X << p * I3, sym(He) << -I3]
+        cons += [cp.norm(Z) <= params["lmax"] * p]
+        cons += _disk(X, XA, params.get("radius"))
+        prob = cp.Problem(cp.Minimize(p), cons)
+        return Program(prob, params, {"X": X, "Z": Z, "p": p})
+
+    return build
 
 
 def theorem1_synthesis(
@@ -301,17 +341,32 @@ def theorem1_synthesis(
     ``He(X Ahat - Z e1') + 2 mu X <= -I``, ``p/100 I <= X <= p I``, ``||Z|| <= lmax p``
     (so the scaled gain ``||X^-1 Z|| <= 100 lmax``), and with ``radius`` the poles of
     ``Ahat - X^-1 Z e1'`` in ``|s| <= radius`` (:func:`_disk`); minimises ``p`` (then
-    ``l = X^-1 Z``). Variables ``X`` (3 x 3), ``Z`` (3,), ``p``.
+    ``l = X^-1 Z``). Variables ``X`` (3 x 3), ``Z`` (3,), ``p``. A parametrised
+    program, compiled once per thread and disk choice.
     """
-    X = cp.Variable((3, 3), symmetric=True)
-    Z = cp.Variable((3, 1))
-    p = cp.Variable()
-    C = np.array([[1.0, 0.0, 0.0]])
-    XA = X @ Ahat - Z @ C
-    He = XA + XA.T + 2 * mu * X
-    cons = [X >> (p / 100.0) * I3, X << p * I3, sym(He) << -I3, cp.norm(Z) <= lmax * p]
-    cons += _disk(X, XA, radius)
-    return solve(cp.Problem(cp.Minimize(p), cons), {"X": X, "Z": Z, "p": p})
+    disk = radius is not None
+    prog = cached_program(f"theorem1_synthesis_disk{disk}", _build_theorem1(disk))
+    return run_program(prog, _scaled_values(Ahat, mu, lmax, radius))
+
+
+def _build_lipschitz(with_disk: bool) -> Callable[[], Program]:
+    def build() -> Program:
+        params = _scaled_params(with_disk)
+        params["L2"] = cp.Parameter(nonneg=True, name="L2")
+        X = cp.Variable((3, 3), symmetric=True, name="X")
+        Z = cp.Variable((3, 1), name="Z")
+        t = cp.Variable(name="t")
+        p = cp.Variable(name="p")
+        XA = X @ params["Ahat"] - Z @ np.array([[1.0, 0.0, 0.0]])
+        He = XA + XA.T + 2 * params["mu"] * X + params["L2"] * (E3 @ E3.T)
+        corner = cp.reshape(t - 1, (1, 1), order="C")
+        M = cp.bmat([[He + t * I3, X @ E3], [E3.T @ X, corner]])
+        cons = [X >> I3, X << p * I3, cp.norm(Z) <= params["lmax"] * p, sym(M) << 0, t <= 1.0]
+        cons += _disk(X, XA, params.get("radius"), t)
+        prob = cp.Problem(cp.Maximize(t), cons)
+        return Program(prob, params, {"X": X, "Z": Z, "t": t})
+
+    return build
 
 
 def lipschitz_synthesis(
@@ -322,6 +377,8 @@ def lipschitz_synthesis(
     ``[[He(X Ahat - Z e1') + 2 mu X + L^2 e3 e3' + t I, X e3], [e3' X, -1 + t]] <= 0``,
     ``I <= X <= p I``, ``||Z|| <= lmax p``, with ``radius`` the pole disk with margin
     ``t`` (:func:`_disk`); maximises the margin ``t`` (certified when ``t > 0``).
+    A parametrised program, compiled once per thread and disk choice: the
+    synthesis bisects on ``L`` and re-solves it with new values only.
 
     Clarabel only (``first_only``): the synthesis bisects on ``L`` and takes an
     unsolved program for an infeasible one. Where Clarabel stops short of
@@ -329,14 +386,8 @@ def lipschitz_synthesis(
     about 0.8 to an inaccurate solve) the SCS fall-back never returned ``OPTIMAL``
     on the bundled stages either (16 of 39 bisection steps), and cost about 1 s each.
     """
-    X = cp.Variable((3, 3), symmetric=True)
-    Z = cp.Variable((3, 1))
-    t = cp.Variable()
-    C = np.array([[1.0, 0.0, 0.0]])
-    XA = X @ Ahat - Z @ C
-    He = XA + XA.T + 2 * mu * X + L**2 * (E3 @ E3.T)
-    M = cp.bmat([[He + t * I3, X @ E3], [E3.T @ X, cp.reshape(t - 1, (1, 1), order="C")]])
-    p = cp.Variable()
-    cons = [X >> I3, X << p * I3, cp.norm(Z) <= lmax * p, sym(M) << 0, t <= 1.0]
-    cons += _disk(X, XA, radius, t)
-    return solve(cp.Problem(cp.Maximize(t), cons), {"X": X, "Z": Z, "t": t}, first_only=True)
+    disk = radius is not None
+    prog = cached_program(f"lipschitz_synthesis_disk{disk}", _build_lipschitz(disk))
+    values = _scaled_values(Ahat, mu, lmax, radius)
+    values["L2"] = float(L) ** 2
+    return run_program(prog, values, first_only=True)
