@@ -13,13 +13,15 @@ from typing import Any
 
 import numpy as np
 
-from .styles import BOUND_COLOR, Styler, legend, new_figure
+from .styles import BOUND_COLOR, Styler, legend, new_figure, plain_log_ticks
 
 __all__ = ["save_figure", "plot_observer_states", "plot_estimation_errors"]
 
 
 def save_figure(fig: Any, path: Any, *, dpi: int = 120) -> None:
-    """Write ``fig`` to ``path`` (format from the suffix, e.g. PNG via Agg)."""
+    """Write ``fig`` to ``path`` (format from the suffix, e.g. PNG via Agg), its log axes
+    labelled in plain text (:func:`~bwdesign.plotting.styles.plain_log_ticks`)."""
+    plain_log_ticks(fig)
     fig.savefig(path, dpi=dpi)
 
 
