@@ -20,6 +20,7 @@ estimation errors and anywhere else.
 
 from __future__ import annotations
 
+import functools
 import re
 from typing import Any
 
@@ -209,18 +210,15 @@ def plain_log_ticks(fig: Any) -> None:
                     fmt.__class__ = plain
 
 
-_PLAIN: list[type] = []
-
-
+@functools.cache
 def _plain_formatter_class() -> type:
-    if not _PLAIN:
-        from matplotlib.ticker import LogFormatterSciNotation
+    """The formatter class, defined on first use (matplotlib is imported only then)."""
+    from matplotlib.ticker import LogFormatterSciNotation
 
-        class PlainLogFormatter(LogFormatterSciNotation):
-            """:class:`~matplotlib.ticker.LogFormatterSciNotation` in plain Unicode text."""
+    class PlainLogFormatter(LogFormatterSciNotation):
+        """:class:`~matplotlib.ticker.LogFormatterSciNotation` in plain Unicode text."""
 
-            def __call__(self, x: float, pos: int | None = None) -> str:
-                return plain_tick_label(super().__call__(x, pos))
+        def __call__(self, x: float, pos: int | None = None) -> str:
+            return plain_tick_label(super().__call__(x, pos))
 
-        _PLAIN.append(PlainLogFormatter)
-    return _PLAIN[0]
+    return PlainLogFormatter
