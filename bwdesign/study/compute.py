@@ -106,13 +106,15 @@ ANY_PLANT = frozenset(("plant", "tuning", "loop", "versions"))
 _CERTIFYING = "certifying the configured gains and synthesising a certified set"
 _TIERS = "synthesis per tier (the largest envelope synthesised gains reach)"
 
-#: Parts a second process computes beside the others (``study(workers=2)``): the per-tier
-#: synthesis reads the envelope alone. The robust section reads the tuning, so it is
-#: computed once the tuning is there, by two children forked then, each certifying
-#: every second loop (robust_study(workers=)): the second process
-#: computed the tuning once more when it had the section whole, and the section then
-#: took as long as the rest (stack_actuator_800hz: the report 14.1 s; 10.4 s split).
-BESIDE = ("tier_synthesis",)
+#: Parts a second process computes beside the others (``study(workers=2)``): the
+#: synthesised gains, the configured gains' certificate and the per-tier synthesis read the
+#: envelope alone (the synthesis first: a stage without gains tracks with its gains).
+#: The robust section reads the tuning, so it is computed once the tuning is there, by
+#: two children forked then, each certifying every second loop (robust_study(workers=)):
+#: the second process computed the tuning once more when it had the section whole, and
+#: the section then took as long as the rest (stack_actuator_800hz: the report 14.1 s;
+#: 10.4 s split).
+BESIDE = ("synthesis", "configured", "tier_synthesis")
 #: Parts that read :data:`BESIDE`'s: computed after the others, when the second process
 #: has had the time to send them.
 _AFTER_BESIDE = ("verdict", "error_dynamics", "firmware")
