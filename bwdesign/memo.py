@@ -22,7 +22,7 @@ import threading
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-__all__ = ["Memo", "clear_all"]
+__all__ = ["Memo", "clear_all", "snapshot", "restore"]
 
 T = TypeVar("T")
 
@@ -36,6 +36,24 @@ def clear_all() -> None:
     were replaced, say: a test's monkeypatch)."""
     for memo in _ALL:
         memo.clear()
+
+
+def snapshot() -> list[tuple[Memo, dict[bytes, object]]]:
+    """Every :class:`Memo`'s kept answers as they are now, for :func:`restore`.
+
+    The answers themselves are not copied: a memo hands out copies only, so what it
+    keeps is never changed."""
+    return [(memo, memo.kept()) for memo in _ALL]
+
+
+def restore(state: list[tuple[Memo, dict[bytes, object]]]) -> None:
+    """Every :class:`Memo` back to the answers of ``state`` (:func:`snapshot`); one made
+    since is emptied. A test suite takes a snapshot before a test replaces a function of
+    the package and restores it after: nothing computed under the replacement is kept,
+    and what was kept before comes back for the tests that follow."""
+    before = {id(memo): kept for memo, kept in state}
+    for memo in _ALL:
+        memo.replace_kept(before.get(id(memo), {}))
 
 
 class Memo(Generic[T]):
@@ -75,6 +93,16 @@ class Memo(Generic[T]):
         """Forget every kept answer."""
         with self._lock:
             self._kept.clear()
+
+    def kept(self) -> dict[bytes, T]:
+        """The kept answers by key (a new dict; the answers are the kept ones)."""
+        with self._lock:
+            return dict(self._kept)
+
+    def replace_kept(self, kept: dict[bytes, T]) -> None:
+        """Keep exactly ``kept`` (from :meth:`kept`), oldest first as it is ordered."""
+        with self._lock:
+            self._kept = dict(kept)
 
     def __len__(self) -> int:
         return len(self._kept)

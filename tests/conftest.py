@@ -142,25 +142,28 @@ def _own_study_cache(tmp_path_factory, monkeypatch):
 def _nothing_kept_across_a_patch(monkeypatch):
     """The package keeps pure functions' answers (bwdesign.memo); a test that replaces
     anything (monkeypatch.setattr, setitem, delattr, delitem) computes afresh: every kept
-    answer is forgotten when it patches and when it ends, so no answer computed under a
-    patch reaches another test and no test's patch is hidden by an answer kept before.
-    Setting an environment variable (monkeypatch.setenv) is not a patch of the package."""
-    from bwdesign.memo import clear_all
+    answer is forgotten when it patches, so no test's patch is hidden by an answer kept
+    before, and when it ends the answers kept before its first patch come back
+    (memo.restore), so no answer computed under a patch reaches another test and the
+    tests after it do not compute again what was kept. Setting an environment variable
+    (monkeypatch.setenv) is not a patch of the package."""
+    from bwdesign import memo
 
-    patched = []
+    before = []  # the answers kept before the test's first patch
     for name in ("setattr", "setitem", "delattr", "delitem"):
         real = getattr(monkeypatch, name)
 
         def forgetting(*args, _real=real, **kwargs):
             if not (args and args[0] is os.environ):  # setenv is setitem on os.environ
-                clear_all()
-                patched.append(True)
+                if not before:
+                    before.append(memo.snapshot())
+                memo.clear_all()
             return _real(*args, **kwargs)
 
         object.__setattr__(monkeypatch, name, forgetting)
     yield
-    if patched:
-        clear_all()
+    if before:
+        memo.restore(before[0])
 
 
 @pytest.fixture(params=["paper_experiment", "paper_simulation_corrected"])

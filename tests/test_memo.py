@@ -66,3 +66,22 @@ def test_a_refusal_is_not_kept_and_threads_share_one_memo():
     for t in threads:
         t.join()
     assert not errors and len(memo) <= 4
+
+
+def test_restore_brings_back_what_was_kept_and_drops_what_came_after():
+    from bwdesign.memo import restore, snapshot
+
+    memo: Memo[int] = Memo(4)
+    memo.get((1,), lambda: 10)
+    state = snapshot()
+    clear_all()  # a test patches: everything forgotten
+    assert len(memo) == 0
+    assert memo.get((1,), lambda: -1) == -1  # computed afresh under the patch
+    memo.get((2,), lambda: 20)
+    late: Memo[int] = Memo(2)  # made after the snapshot
+    late.get((3,), lambda: 30)
+    restore(state)
+    assert len(memo) == 1 and memo.get((1,), lambda: -2) == 10 and len(late) == 0
+    kept = memo.kept()
+    kept.clear()  # a copy of the dict: the memo keeps its answers
+    assert len(memo) == 1
