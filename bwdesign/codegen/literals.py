@@ -45,6 +45,7 @@ class CTypes:
             "six": lit(6.0),
             "half": lit(0.5),
             "tiny": lit(1e-8),
+            "crossing_floor": lit(1e-6),
         }
 
 

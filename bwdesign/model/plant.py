@@ -136,6 +136,17 @@ def hysteresis_increment(params: BoucWenParams, h: float, u0: float, u1: float) 
             wz = -g / alpha
         else:
             arg = -cm * g / alpha
+            # Ends before the zero crossing, decided without log1p where it is clear:
+            # log1p(a) lies between a/(1 + a) and a, so the crossing log1p(arg)/cm is at
+            # least b/|cm|; where w |cm| <= b/2 the exact test below holds by a factor of
+            # two, which no rounding of either side reverses: the same branch and numbers.
+            # b >= 1e-6 keeps an underflow of w |cm| from deciding; NaN falls through.
+            if cm > 0.0:
+                b = arg / (1.0 + arg) if arg > 0.0 else 0.0
+            else:
+                b = -arg
+            if b >= 1e-6 and w * abs(cm) <= 0.5 * b:
+                return s * _branch(g, w, alpha, cm)
             wz = math.log1p(arg) / cm if arg > -1.0 else math.inf
         if w <= wz:
             return s * _branch(g, w, alpha, cm)

@@ -55,6 +55,17 @@ def _branch(h, w, alpha, c):
 
 
 @njit(cache=True, inline="always")
+def _inside_first_branch(w, cm, arg):
+    """The jump ends before the zero crossing, decided without ``log1p`` where it is clear
+    (the test :func:`bwdesign.model.plant.hysteresis_increment` makes, same operations)."""
+    if cm > 0.0:
+        b = arg / (1.0 + arg) if arg > 0.0 else 0.0  # arg <= 0 (or NaN): no crossing ahead
+    else:
+        b = -arg
+    return b >= 1e-6 and w * abs(cm) <= 0.5 * b
+
+
+@njit(cache=True, inline="always")
 def hysteresis_jump(alpha, beta, gamma, h, u0, u1):
     """:func:`bwdesign.model.plant.hysteresis_increment`, compiled (same operations)."""
     du = u1 - u0
@@ -69,6 +80,8 @@ def hysteresis_jump(alpha, beta, gamma, h, u0, u1):
             wz = -g / alpha
         else:
             arg = -cm * g / alpha
+            if _inside_first_branch(w, cm, arg):
+                return s * _branch(g, w, alpha, cm)
             wz = math.log1p(arg) / cm if arg > -1.0 else math.inf
         if w <= wz:
             return s * _branch(g, w, alpha, cm)
