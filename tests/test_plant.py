@@ -203,7 +203,15 @@ def test_reversal_does_not_retrace(p, frac, u0, du):
 def _increment_always_log1p(p, h, u0, u1):
     """hysteresis_increment as it was before the zero crossing was decided without log1p:
     the crossing computed for every jump against its direction."""
-    from bwdesign.model.plant import _branch
+
+    def branch(h, w, c):  # dh/dw = alpha - c h over w, as bwdesign.model.plant solves it
+        x = c * w
+        frac = 1.0 - x / 2.0 + x * x / 6.0 if abs(x) < 1e-8 else -math.expm1(-x) / x
+        try:
+            decay = math.exp(-x)
+        except OverflowError:
+            return math.copysign(math.inf, h if h != 0 else p.alpha)
+        return h * decay + p.alpha * w * frac
 
     du = u1 - u0
     if du == 0.0:
@@ -218,9 +226,9 @@ def _increment_always_log1p(p, h, u0, u1):
             arg = -cm * g / p.alpha
             wz = math.log1p(arg) / cm if arg > -1.0 else math.inf
         if w <= wz:
-            return s * _branch(g, w, p.alpha, cm)
+            return s * branch(g, w, cm)
         g, w = 0.0, w - wz
-    return s * _branch(g, w, p.alpha, p.beta + p.gamma)
+    return s * branch(g, w, p.beta + p.gamma)
 
 
 def test_the_crossing_decided_without_log1p_changes_no_bit():

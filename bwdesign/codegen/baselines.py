@@ -29,7 +29,7 @@ from ..model.inverse import MAX_ITER, inverse_bound
 from ..model.inverse import TOL as INVERSE_TOL
 from ..output.files import prepare_directory
 from ..output.jsonenc import dump_json
-from .export import CExport, check_prefix, fill
+from .export import CExport, check_prefix, fill, hysteresis_source
 from .literals import CTypes
 
 __all__ = ["EXPORTED_BASELINES", "FLOAT32_TOL", "baseline_c_sources", "export_baseline_c"]
@@ -94,7 +94,7 @@ def _bwff_code(ct: CTypes, base: dict[str, str], ff: InverseBoucWenFeedforward) 
         a1=lit(params.a1), a2=lit(params.a2), a3=lit(params.a3),
         sg=lit(1.0 if params.a3 > 0 else -1.0), alpha=lit(params.alpha), beta=lit(params.beta),
         gamma=lit(params.gamma), h_max=lit(inverse_bound(params)), b_scale=lit(1.0001),
-        b_pad=lit(1e-12), tol=lit(tol),
+        b_pad=lit(1e-12), tol=lit(tol), hysteresis=hysteresis_source(ct),
     )  # fmt: skip
     return proto, code
 

@@ -120,6 +120,13 @@ def fill(name: str, **values: Any) -> str:
         raise InternalError(f"template {name}: no value for ${err.args[0]}") from None
 
 
+def hysteresis_source(ct: CTypes) -> str:
+    """The exact hysteresis jump in C (``branch``, ``inside_first_branch`` and
+    ``hysteresis``, static) for a file that defines ``ALPHA``, ``BETA`` and ``GAMMA``
+    before it: the observers' source and the inverse feedforward of the baselines."""
+    return fill("hysteresis.c.tmpl", **ct.names())
+
+
 def check_prefix(prefix: str) -> str:
     if not isinstance(prefix, str) or not _PREFIX.fullmatch(prefix):
         raise InputError(f"prefix must be a C identifier of at most 31 characters, got {prefix!r}")
@@ -427,6 +434,7 @@ def c_sources(
         length_unit=params.length_unit,
         input_unit=params.input_unit,
         observers="".join(impl),
+        hysteresis=hysteresis_source(ct),
     )
     init_dispatch, step_dispatch = _harness_dispatch(prefix, list(_THREE_STATE))
     harness = fill(
