@@ -8,7 +8,7 @@ for ``pi-bwff`` the exact inverse Bouc–Wen model's safeguarded Newton iteratio
 order), ``harness.c`` (reads the measurement and the reference per sample, prints ``u_k``
 with ``%.17g``) and ``export.json``. Every constant is a hexadecimal literal, exact in the
 chosen precision (:mod:`bwdesign.codegen.literals`). float64 reproduces the Python loop's
-inputs bit for bit (the inverse's ``exp``/``expm1``/``log1p`` are the libm calls Python's
+inputs bit for bit (the inverse's ``expm1``/``log1p`` are the libm calls Python's
 ``math`` makes); float32 within a stated fraction of the input range
 (``tests/test_baselines.py``). The float32 inverse stops its Newton iteration at
 :data:`FLOAT32_TOL` relative instead of 1e-14 (below float32's rounding).

@@ -24,7 +24,7 @@ class CTypes:
         single = precision == "float32"
         self.real = "float" if single else "double"
         suffix = "f" if single else ""
-        self.fabs, self.exp = "fabs" + suffix, "exp" + suffix
+        self.fabs = "fabs" + suffix
         self.expm1, self.log1p = "expm1" + suffix, "log1p" + suffix
 
     def literal(self, value: float) -> str:
@@ -36,7 +36,6 @@ class CTypes:
         return {
             "real": self.real,
             "fabs": self.fabs,
-            "exp": self.exp,
             "expm1": self.expm1,
             "log1p": self.log1p,
             "zero": lit(0.0),

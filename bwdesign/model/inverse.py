@@ -10,7 +10,7 @@ with ``H`` the closed-form hysteresis increment
 input and hysteresis state. :func:`inverse_step` solves it by a safeguarded Newton
 iteration whose every floating-point operation is written once more, in the same
 order, by the C export of the ``pi-bwff`` baseline (:mod:`bwdesign.codegen.baselines`),
-so float64 C reproduces it bit for bit (scalar ``math.exp``/``expm1``/``log1p``, the
+so float64 C reproduces it bit for bit (scalar ``math.expm1``/``log1p``, the
 libm the C links).
 
 The iteration, on ``F(v) = sg (a3 v - a1 H(v) - R)`` with ``sg = sign(a3)``:

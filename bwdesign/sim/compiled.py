@@ -12,7 +12,7 @@ after scenario (each scenario's state and sums in local scalars):
 loop's step (the same inline helpers) for one scenario and keeps its record, for
 :func:`bwdesign.sim.simulate`'s fast path. Each does the scalar loop's float
 operations in the same order, with the same closed-form hysteresis jump
-(:func:`bwdesign.model.plant.hysteresis_increment`; numba calls the same libm ``exp``,
+(:func:`bwdesign.model.plant.hysteresis_increment`; numba calls the same libm
 ``expm1`` and ``log1p`` as Python's ``math``), so every scenario's metrics equal
 :func:`bwdesign.sim.simulate`'s to the bit (tested, noise, delay and limits included).
 
@@ -47,11 +47,12 @@ __all__ = [
 @njit(cache=True, inline="always")
 def _branch(h, w, alpha, c):
     x = c * w
+    e = math.expm1(-x)
     if abs(x) < 1e-8:
         frac = 1.0 - x / 2.0 + x * x / 6.0
     else:
-        frac = -math.expm1(-x) / x
-    return h * math.exp(-x) + alpha * w * frac
+        frac = -e / x
+    return h + (h * e + alpha * w * frac)
 
 
 @njit(cache=True, inline="always")

@@ -71,7 +71,7 @@ def hysteresis_increment_batch(alpha, beta, gamma, h, u0, u1):
     """:func:`bwdesign.hysteresis_increment` over arrays (parameters may be arrays too).
 
     The same closed form and the same float operations per element; each element
-    evaluates only the branch it ends on (one ``expm1`` and one ``exp``). The rare
+    evaluates only the branch it ends on (one ``expm1``). The rare
     special cases (``beta = gamma``, a vanishing exponent) are patched by mask, so
     the common path costs no second evaluation.
     """
@@ -119,12 +119,13 @@ class BatchHysteresis:
         g[cross] = 0.0  # g = s * h is this call's own array
         w = np.where(cross, w - wz, w)
         x = c * w
-        frac = -np.expm1(-x) / x
+        e = np.expm1(-x)
+        frac = -e / x
         small = np.abs(x) < 1e-8
         if small.any():
             xs = x[small]
             frac[small] = 1.0 - xs / 2.0 + xs * xs / 6.0
-        out = s * (g * np.exp(-x) + alpha * w * frac)
+        out = s * (g + (g * e + alpha * w * frac))
         still = du == 0.0
         out[still] = h[still]
         return out
