@@ -85,11 +85,11 @@ def _branch(h: float, w: float, alpha: float, c: float) -> float:
         return math.copysign(math.inf, h if h != 0 else alpha)
     if abs(x) < 1e-8:
         frac = 1.0 - x / 2.0 + x * x / 6.0  # (1 - e^{-x})/x
-    else:
-        frac = -e / x
-    # h e^{-x} + alpha w frac written as h + (h (e^{-x} - 1) + alpha w frac): the same
-    # value with one rounding more in the small correction, instead of a second call (exp)
-    return h + (h * e + alpha * w * frac)
+        return h + (h * e + alpha * w * frac)
+    # h e^{-x} + (alpha / c) (1 - e^{-x}) = h + (h - alpha / c) (e^{-x} - 1): no second
+    # call (exp) and no division by x; alpha / c is the branch's fixed point, the same
+    # float wherever it is computed (the compiled loop and the C export fold it once)
+    return h + e * (h - alpha / c)
 
 
 def hysteresis_increment(params: BoucWenParams, h: float, u0: float, u1: float) -> float:
@@ -140,14 +140,13 @@ def hysteresis_increment(params: BoucWenParams, h: float, u0: float, u1: float) 
             arg = -cm * g / alpha
             # Ends before the zero crossing, decided without log1p where it is clear:
             # log1p(a) lies between a/(1 + a) and a, so the crossing log1p(arg)/cm is at
-            # least b/|cm|; where w |cm| <= b/2 the exact test below holds by a factor of
-            # two, which no rounding of either side reverses: the same branch and numbers.
-            # b >= 1e-6 keeps an underflow of w |cm| from deciding; NaN falls through.
-            if cm > 0.0:
-                b = arg / (1.0 + arg) if arg > 0.0 else 0.0
-            else:
-                b = -arg
-            if b >= 1e-6 and w * abs(cm) <= 0.5 * b:
+            # least b/|cm| with b = arg/(1 + arg) (cm > 0) or -arg (cm < 0); where
+            # w |cm| <= b/2 the exact test below holds by a factor of two, which no
+            # rounding of either side reverses: the same branch and numbers. Tested as
+            # num / den with both sides multiplied by den > 0 (no division); b >= 1e-6
+            # keeps an underflow of w |cm| from deciding; NaN falls through.
+            num, den = (arg, 1.0 + arg) if cm > 0.0 else (-arg, 1.0)
+            if num >= 1e-6 * den and w * abs(cm) * den <= 0.5 * num:
                 return s * _branch(g, w, alpha, cm)
             wz = math.log1p(arg) / cm if arg > -1.0 else math.inf
         if w <= wz:

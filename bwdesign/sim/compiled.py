@@ -50,9 +50,8 @@ def _branch(h, w, alpha, c):
     e = math.expm1(-x)
     if abs(x) < 1e-8:
         frac = 1.0 - x / 2.0 + x * x / 6.0
-    else:
-        frac = -e / x
-    return h + (h * e + alpha * w * frac)
+        return h + (h * e + alpha * w * frac)
+    return h + e * (h - alpha / c)  # alpha / c is loop-invariant: computed once a run
 
 
 @njit(cache=True, inline="always")
@@ -60,10 +59,10 @@ def _inside_first_branch(w, cm, arg):
     """The jump ends before the zero crossing, decided without ``log1p`` where it is clear
     (the test :func:`bwdesign.model.plant.hysteresis_increment` makes, same operations)."""
     if cm > 0.0:
-        b = arg / (1.0 + arg) if arg > 0.0 else 0.0  # arg <= 0 (or NaN): no crossing ahead
+        num, den = arg, 1.0 + arg
     else:
-        b = -arg
-    return b >= 1e-6 and w * abs(cm) <= 0.5 * b
+        num, den = -arg, 1.0
+    return num >= 1e-6 * den and w * abs(cm) * den <= 0.5 * num
 
 
 @njit(cache=True, inline="always")

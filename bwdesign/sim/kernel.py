@@ -120,12 +120,13 @@ class BatchHysteresis:
         w = np.where(cross, w - wz, w)
         x = c * w
         e = np.expm1(-x)
-        frac = -e / x
+        out = g + e * (g - alpha / c)
         small = np.abs(x) < 1e-8
         if small.any():
-            xs = x[small]
-            frac[small] = 1.0 - xs / 2.0 + xs * xs / 6.0
-        out = s * (g + (g * e + alpha * w * frac))
+            xs, es, gs = x[small], e[small], g[small]
+            frac = 1.0 - xs / 2.0 + xs * xs / 6.0
+            out[small] = gs + (gs * es + (alpha * w)[small] * frac)
+        out = s * out
         still = du == 0.0
         out[still] = h[still]
         return out
