@@ -656,6 +656,24 @@ def test_compiled_noise_is_numpys(seed, n, scale):
     assert np.array_equal(out, scale * np.random.default_rng(seed).standard_normal(n))
 
 
+@pytest.mark.parametrize("bounded", [False, True])
+def test_noise_rows_are_each_seeds_own_numbers(bounded):
+    """noise_rows reuses one Generator, its state set row by row: each row is still
+    ``std * default_rng(seed).standard_normal(n)`` (or its sign), whatever came before it
+    (a seed repeated, rows of zero std between, odd lengths that leave a half-used word)."""
+    from bwdesign.sim.compiled import noise_rows
+
+    seeds = np.array([3, 2**40, 3, 0, 17, 9])
+    std = np.array([0.02, 1.0, 0.5, 0.0, -1.0, 3.5])
+    for n in (1, 7, 5000):
+        rows = np.full((len(seeds), n), np.nan)
+        noise_rows(seeds, std, bounded, rows)
+        for i, (seed, s) in enumerate(zip(seeds.tolist(), std.tolist(), strict=True)):
+            draw = np.random.default_rng(seed).standard_normal(n)
+            want = np.zeros(n) if s <= 0 else s * (np.sign(draw) if bounded else draw)
+            assert np.array_equal(rows[i], want), (seed, s, n)
+
+
 def _tuned_or_baseline(tune, observer):
     """The tuned law with ``observer``, or (``"baseline"``) the stage's tuned PI loop."""
     from bwdesign import tune_baseline
