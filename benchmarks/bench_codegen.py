@@ -14,7 +14,7 @@ of the exported PHSO and PHDO with Python on a 1e5-step sine (largest error rela
 each state's range; for the PHDO also d's error relative to the lumped x3 + d's range).
 The step's cost depends on the data: the input table's z is not the model's response,
 which drives the PHSO's x3 out of the hysteresis range, so most of its jumps take the
-reversal branch (one more log1p and exp); the PHDO's copy (l3 = 0) stays in range.
+reversal branch (its crossing test, at times a log1p); the PHDO's copy (l3 = 0) stays in range.
 """
 
 from __future__ import annotations
