@@ -167,7 +167,15 @@ def test_batch_detects_divergence_per_scenario():
     for i, tp in enumerate(tps):
         r = simulate(loop, ref, duration=0.5, true_params=tp)
         assert (b.stable[i], b.status[i]) == (r.stable, r.status)
+        if r.stable:  # the scenario run beside the diverged one (and the odd last) exact
+            assert b.me[i] == r.metrics.me
     assert not b.stable[1] and b.stable[0] and np.isnan(b.me[1])
+    # in either place of the kernel's pair, alone or last: the same answer
+    for order in ([1, 0, 2], [0, 2, 1], [1]):
+        bo = simulate_batch(loop, ref, [tps[i] for i in order], duration=0.5)
+        for k, i in enumerate(order):
+            assert (bo.stable[k], bo.status[k]) == (b.stable[i], b.status[i])
+            assert bo.me[k] == b.me[i] or (np.isnan(bo.me[k]) and np.isnan(b.me[i]))
 
 
 def test_draw_depends_only_on_the_seed():

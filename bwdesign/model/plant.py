@@ -83,7 +83,7 @@ def _branch(h: float, w: float, alpha: float, c: float) -> float:
         e = math.expm1(-x)  # e^{-x} - 1: one libm call gives the decay and the gain
     except OverflowError:  # only for unbounded models (c < 0)
         return math.copysign(math.inf, h if h != 0 else alpha)
-    if abs(x) < 1e-8:
+    if not abs(x) >= 1e-8:  # NaN too: alpha / c below only where c != 0
         frac = 1.0 - x / 2.0 + x * x / 6.0  # (1 - e^{-x})/x
         return h + (h * e + alpha * w * frac)
     # h e^{-x} + (alpha / c) (1 - e^{-x}) = h + (h - alpha / c) (e^{-x} - 1): no second
