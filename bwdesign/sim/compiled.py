@@ -306,6 +306,17 @@ def _sums(out, i, acc):
     out[i, 9], out[i, 19], out[i, 20] = acc[9], acc[10], acc[11]
 
 
+@njit(cache=True, inline="always")
+def _checked(out, i, k, limit, vlim, x, h, u, acc):
+    """Scenario ``i`` still inside the divergence limits after sample ``k``; where it left
+    them, its step, state (:func:`_stop`) and sums are written and False returned."""
+    if _within(limit, vlim, x, h, u[1]):
+        return True
+    _stop(out, i, k, x[0], x[1], x[2], h[0], h[1], h[4], u[1])
+    _sums(out, i, acc)
+    return False
+
+
 @njit(cache=True)
 def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dist, out):
     # two scenarios at a time, each one's state and sums in local scalars the compiler
@@ -313,11 +324,11 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
     # rows, so each was reloaded: 52 ns a scenario-step). A sample's chain (the input, its
     # jump through expm1, the plant, the next measurement) feeds the next sample, so one
     # scenario leaves the processor waiting; two independent chains side by side overlap
-    # (47.0 -> 39.8 ns a scenario-step). Both advance every sample, without a branch
-    # around either (with one, the pair was slower than one at a time): a scenario that
-    # leaves the divergence limits has its sums and state written there and is carried on
-    # unread. An odd last scenario is run as both of its pair. Each scenario's operations
-    # are the scalar loop's, in its order.
+    # (47.0 -> 39.8 ns a scenario-step). Both advance every sample, without a branch on
+    # their state around either (with one, the pair was slower than one at a time): a
+    # scenario that leaves the divergence limits has its sums and state written there and
+    # is carried on unread. An odd last scenario runs alone (``two``, fixed over the loop).
+    # Each scenario's operations are the scalar loop's, in its order.
     n = ref.shape[1] - 1
     ff, xd, win = ref[0], ref[1], ref[2]
     rows = dist.shape[0]
@@ -325,12 +336,13 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
     limit, noisy = flags[4], flags[5] != 0.0
     N = plant.shape[0]
     for i in range(0, N, 2):
-        j = i + 1 if i + 1 < N else i
+        two = i + 1 < N
+        j = i + 1 if two else i
         pa, va = _plant_row(plant, i)
         pb, vb = _plant_row(plant, j)
         xa, ha, ua, aa = _fresh(start)
         xb, hb, ub, ab = _fresh(start)
-        on_a = on_b = True
+        on_a, on_b = True, two
         out[i, 10], out[i, 11] = 1.0, -1.0  # alive, no divergence step
         out[j, 10], out[j, 11] = 1.0, -1.0
         da, db = (i, j) if rows > 1 else (0, 0)
@@ -345,17 +357,14 @@ def _observer_batch(plant, model, gains, law, lim, flags, start, ref, noise, dis
             xa, ha, ua, aa = _sample(
                 pa, sw, K, m, lw, lm, xa, ha, ua, aa, za, inw, track, xd[k], r0, r1, dka
             )
-            xb, hb, ub, ab = _sample(
-                pb, sw, K, m, lw, lm, xb, hb, ub, ab, zb, inw, track, xd[k], r0, r1, dkb
-            )
-            if on_a and not _within(limit, va, xa, ha, ua[1]):
-                _stop(out, i, k, xa[0], xa[1], xa[2], ha[0], ha[1], ha[4], ua[1])
-                _sums(out, i, aa)
-                on_a = False
-            if on_b and not _within(limit, vb, xb, hb, ub[1]):
-                _stop(out, j, k, xb[0], xb[1], xb[2], hb[0], hb[1], hb[4], ub[1])
-                _sums(out, j, ab)
-                on_b = False
+            if two:
+                xb, hb, ub, ab = _sample(
+                    pb, sw, K, m, lw, lm, xb, hb, ub, ab, zb, inw, track, xd[k], r0, r1, dkb
+                )
+            if on_a:
+                on_a = _checked(out, i, k, limit, va, xa, ha, ua, aa)
+            if on_b:
+                on_b = _checked(out, j, k, limit, vb, xb, hb, ub, ab)
             if not (on_a or on_b):
                 break
         if on_b:
