@@ -121,7 +121,7 @@ class BatchHysteresis:
         x = c * w
         e = np.expm1(-x)
         out = g + e * (g - alpha / c)
-        small = np.abs(x) < 1e-8
+        small = ~(np.abs(x) >= 1e-8)  # NaN too, as the scalar branch decides it
         if small.any():
             xs, es, gs = x[small], e[small], g[small]
             frac = 1.0 - xs / 2.0 + xs * xs / 6.0
