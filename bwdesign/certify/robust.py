@@ -53,7 +53,11 @@ change from one sample to the next is bounded too
 ``Q = G^-1 b_e`` is exact: ``z~ = z' + Q j_k`` with ``z'+ = A(rho_k) z' + (rho_k - rho_c) E Q
 j_k - Q (j_{k+1} - j_k) + ...``. The certificate computes the per-plant peak-to-peak
 bounds with the jump both ways, fast and slow, and keeps the smaller
-(``details["jump_input"]``); a loop with integral action rejects a slow jump. For
+(``details["jump_input"]``); a loop with integral action rejects a slow jump. The
+fast treatment takes the change bound too where it is finite: its peak-to-peak bounds
+are then those of an input with ``|j| <= J`` and ``|j_(k+1) - j_k| <= dJ`` at once
+(:func:`.peak.l1_bounded_change`, a dual bound evaluated in numpy, no solver), never
+above the plain fast bound; both treatments are still computed and the smaller kept. For
 the PHDO ``rho = 1`` is fixed and there is no coupling term.
 
 The input disturbance (``disturbance=DisturbanceBound(input_max, rate_max)``)
@@ -366,7 +370,7 @@ def _certify(
     change = (
         math.inf if second is None else hysteresis_jump_change_bound(vertices, st.du, second, jump)
     )
-    st = replace(st, scale=size, uddot_max=uddot_max, jump=jump)
+    st = replace(st, scale=size, uddot_max=uddot_max, jump=jump, jump_diff=change)
     data = [_plant_data(st, tp) for tp in vertices + interior]
     # both covers of the reference (.robust_cover): the smaller certified bound
     # the ellipsoid on the per-sample cover first (the exact one if that fails); the
@@ -538,6 +542,9 @@ class _Setup:
     #: the change of that jump from one sample to the next (with ``uddot_max``: the jump is
     #: then a slow input, module doc); inf: the jump is a fast input
     jump_change: float = math.inf
+    #: that change's bound beside a fast jump (the peak-to-peak bounds then take both
+    #: constraints, :func:`.peak.l1_bounded_change`); inf: none assumed
+    jump_diff: float = math.inf
 
     @property
     def n(self) -> int:
@@ -622,6 +629,8 @@ def _plant_data(st: _Setup, tp: BoucWenParams) -> dict[str, Any]:
         "Gie": Gie,
         # the bound of the jump's channel: the jump, or its change (at most twice the jump)
         "jchan": min(st.jump_change, 2 * j) if slow else j,
+        # the fast jump's change from one sample to the next (inf: not bounded)
+        "jdiff": math.inf if slow else st.jump_diff,
         "a3": abs(tp.a3),
         "E": E_b,
         "rows": np.vstack(rows),
@@ -712,7 +721,7 @@ def _conclude(
                 bounds[i] = pk(i)
         if bounds[i] is None and holds:
             bounds[i] = peak(i)
-    method, slow_jump = "ellipsoid", None
+    method, slow_jump, jump_how = "ellipsoid", None, "fast"
     half = (st.rhos[-1] - st.rhos[0]) / 2
     parts = None  # the tracking bound's: (its cover's W, the plant's data) where peak-to-peak
     for (hb2, W, _), dd, l1 in peaks if holds else ():
@@ -725,9 +734,11 @@ def _conclude(
                 if i == 0:
                     parts = (W, dd[int(np.argmax(per))])
                 if i == 0 and np.any(dd[0]["Gie"]):  # the jump a slow input: its change
-                    slow_jump = max(d["jchan"] for d in dd)
+                    slow_jump, jump_how = max(d["jchan"] for d in dd), "slow"
+                elif i == 0 and math.isfinite(dd[0]["jdiff"]):  # fast, its change bounded
+                    slow_jump, jump_how = dd[0]["jdiff"], "fast, change bounded"
                 elif i == 0:
-                    slow_jump = None
+                    slow_jump, jump_how = None, "fast"
         dyn1 = lambda v, j, l1=l1: l1[j][3] + half * l1[j][-1]  # noqa: E731
         step = min(step, input_step_bound(st, dd, dyn1, hb2, noise_max))
     if bounds[1] is not None:
@@ -776,8 +787,9 @@ def _conclude(
             # the second-difference envelope assumed (None: none) and the jump bound it gives
             "uddot_max": st.uddot_max,
             "jump_bound": float(hb[1]),
-            # the tracking bound's: the jump as a slow input (its change bounded) or a fast one
-            "jump_input": "fast" if slow_jump is None else "slow",
+            # the tracking bound's: the jump as a slow input (its change the input), a fast
+            # one whose change is bounded too (.peak.l1_bounded_change), or a fast one
+            "jump_input": jump_how,
             "jump_change_bound": slow_jump,
             # what each input adds to the tracking bound at the plant attaining it
             # (peak-to-peak; None for the ellipsoid's, which does not split)

@@ -187,8 +187,8 @@ def plant_peaks(st: Any, data: list[dict], W: np.ndarray) -> list[np.ndarray] | 
     either end of ``rho``. None if any plant has none (then the ellipsoid's stand)."""
     n, out = st.n, []
     for d in data:
-        rows, Wp = _plant_rows(st, d, W)
-        pb = peak_bounds(d["blocks"], st.rhos, Wp, rows)
+        rows, Wp, change = _plant_rows(st, d, W)
+        pb = peak_bounds(d["blocks"], st.rhos, Wp, rows, change)
         if pb is None:
             return None
         if d["E"] is None and Wp[n + 1] > 0:  # PHDO: dh also as the copy error's increment
@@ -217,9 +217,9 @@ def tracking_parts(st: Any, d: dict, W: np.ndarray) -> dict[str, float] | None:
     change where it is a slow input. The parts sum to the bound (to rounding: it is
     linear in the channels' bounds)."""
     n = st.n
-    rows, Wp = _plant_rows(st, d, W)
+    rows, Wp, change = _plant_rows(st, d, W)
     # all of plant_peaks' rows: the sums stop where every row's rest is small (.peak)
-    parts = peak_parts(d["blocks"], st.rhos, Wp, rows)
+    parts = peak_parts(d["blocks"], st.rhos, Wp, rows, change)
     if parts is None:
         return None
     p = parts[0]
@@ -232,8 +232,9 @@ def tracking_parts(st: Any, d: dict, W: np.ndarray) -> dict[str, float] | None:
     return out
 
 
-def _plant_rows(st: Any, d: dict, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The rows :func:`plant_peaks` bounds for plant ``d`` and its own channel bounds."""
+def _plant_rows(st: Any, d: dict, W: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The rows :func:`plant_peaks` bounds for plant ``d``, its own channel bounds and
+    their changes' bounds (finite for a fast jump whose change is bounded, else inf)."""
     n = st.n
     A_c = np.mean([A for A, _ in d["blocks"]], axis=0)
     rows = np.array(
@@ -245,7 +246,9 @@ def _plant_rows(st: Any, d: dict, W: np.ndarray) -> tuple[np.ndarray, np.ndarray
     )
     Wp = W.copy()
     Wp[: n + 2] = np.concatenate([d["chan"], [d["jchan"], d["hyst"][2]]])
-    return rows, Wp
+    change = np.full(len(Wp), np.inf)
+    change[n] = d["jdiff"]
+    return rows, Wp, change
 
 
 def copy_level(d: dict, dh: float, rows: np.ndarray) -> np.ndarray:
