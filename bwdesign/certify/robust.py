@@ -788,7 +788,8 @@ def _conclude(
             "uddot_max": st.uddot_max,
             "jump_bound": float(hb[1]),
             # the tracking bound's: the jump as a slow input (its change the input), a fast
-            # one whose change is bounded too (.peak.l1_bounded_change), or a fast one
+            # one whose change bound was given to the peak-to-peak bounds too (which use it
+            # only where it can tighten them, .peak.l1_bounded_change), or a fast one
             "jump_input": jump_how,
             "jump_change_bound": slow_jump,
             # what each input adds to the tracking bound at the plant attaining it
