@@ -215,7 +215,6 @@ def _tv_fit(C: np.ndarray, S: np.ndarray, lam: float, fit: float) -> np.ndarray:
     for k in range(1, M):
         cur = transform(cur) + fit * np.abs(C[:, k : k + 1] - g)
         V[k] = cur
-    V[-1] = cur
     at = np.arange(rows)
     i = np.argmin(cur + lam * np.abs(S[:, None] - g), axis=1)
     R = np.empty((rows, M))
@@ -317,20 +316,21 @@ def _terms(blocks, rhos, W, rows, change=None):
     dW = np.full(len(W), np.inf) if change is None else np.asarray(change, float)[keep]
     A_c = np.mean([A for A, _ in blocks], axis=0)
     B_c = np.mean([B[:, keep] for _, B in blocks], axis=0)
-    if len(blocks) == 1:
+
+    def fixed():  # rho fixed (one block, or the two ends the same): the l1 norms alone
         L1 = l1_norms(A_c, B_c, rows)
         if L1 is not None:
             _bounded_change(L1, A_c, B_c, rows, W, dW)
         return None if L1 is None else (keep, W, L1, None)
+
+    if len(blocks) == 1:
+        return fixed()
     (A0, B0), (A1, B1) = blocks
     span = rhos[1] - rhos[0]
     D = np.hstack([A1 - A0, (B1 - B0)[:, keep]]) / span
     U, S, Vt = np.linalg.svd(D)
     if S[0] == 0:
-        L1 = l1_norms(A_c, B_c, rows)
-        if L1 is not None:
-            _bounded_change(L1, A_c, B_c, rows, W, dW)
-        return None if L1 is None else (keep, W, L1, None)
+        return fixed()
     if S[1] > 1e-9 * S[0]:  # not rank one: no scalar small gain here
         return None
     n = A_c.shape[0]
