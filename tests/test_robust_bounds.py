@@ -150,14 +150,16 @@ def test_peak_bounds_with_a_bounded_change_hold_in_simulation():
     bound = peak.peak_bounds([(A, B)], (1.0,), W, L, change)
     plain = peak.peak_bounds([(A, B)], (1.0,), W, L)
     assert np.all(bound <= plain) and np.any(bound < 0.95 * plain)
+    # ten runs side by side (the columns of z), 20000 samples, the first 2000 not scored
+    runs, n = 10, 20000
+    signs = rng.choice([-1.0, 1.0], size=(n, 2, runs))
     worst = np.zeros(2)
-    for _ in range(10):
-        z, f = np.zeros(4), 0.0
-        for k in range(20000):
-            f = np.clip(f + change[0] * rng.choice([-1, 1]), -W[0], W[0])
-            z = A @ z + B @ np.array([f, W[1] * rng.choice([-1, 1])])
-            if k > 2000:
-                worst = np.maximum(worst, np.abs(L @ z))
+    z, f = np.zeros((4, runs)), np.zeros(runs)
+    for k in range(n):
+        f = np.clip(f + change[0] * signs[k, 0], -W[0], W[0])
+        z = A @ z + B @ np.vstack([f, W[1] * signs[k, 1]])
+        if k > 2000:
+            worst = np.maximum(worst, np.abs(L @ z).max(axis=1))
     assert np.all(worst <= bound)
 
 
