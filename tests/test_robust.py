@@ -257,6 +257,35 @@ def test_a_solution_failing_the_outside_check_is_solved_again_with_a_larger_marg
     assert ell.firm(first, 0.9, np.ones(1), None, []) is first and tried == []
 
 
+def test_a_contraction_that_leaves_no_room_for_the_input_weights_is_not_sent_to_the_solver(
+    monkeypatch,
+):
+    """Each block's diagonal holds (1 - a) lam_j >= eps and sum(lam) <= 1: below 1 - a = m eps
+    (m inputs) the program has no solution, and it is answered infeasible without a solve;
+    at and above it the solver is asked, and its answer is the one returned."""
+    from bwdesign.certify import lmi
+    from bwdesign.certify.robust_ellipsoid import EPS, Ellipsoids
+
+    A, B = 0.5 * np.eye(2), np.ones((2, 3))  # m = 3 inputs
+    ell = Ellipsoids(blocks=[(A, B)], n_corner=1, s=np.ones(2))
+    ell.active[A.tobytes() + B.tobytes()] = 0
+    asked = []
+    real = lmi.robust_ellipsoid
+
+    def counted(*args, **kwargs):
+        asked.append(kwargs["a"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(lmi, "robust_ellipsoid", counted)
+    c = np.array([1.0, 0.0])
+    for eps in EPS:
+        sol = ell.attempt(1 - 0.99 * 3 * eps, c, eps)
+        assert not sol.ok and sol.status == "infeasible" and sol.solver == ""
+        assert "no solution: 1 - a" in sol.attempts[0] and asked == []
+    sol = ell.attempt(1 - 0.02, c)  # 1 - a = 0.02 > 3e-5: solved
+    assert sol.ok and asked == [1 - 0.02]
+
+
 @pytest.mark.slow
 def test_a_box_whose_first_solve_misses_the_outside_check_by_rounding_is_certified():
     """paper_experiment's digital-tuning PHSO loop over a +-5 % box on all six parameters:
