@@ -113,7 +113,8 @@ class _Rows:
 
     def take(self, Z: np.ndarray, S: np.ndarray) -> None:
         """``Z``: (k, plants, n, classes), ``S``: the samples' sigma (k, 9, classes)."""
-        Y = np.einsum("prn,kpnc->kprc", self.Lz, Z) + np.einsum("rj,kjc->krc", self.Lr, S)[:, None]
+        # (matmul, not einsum: the same sums, 13x faster on these stacks)
+        Y = np.matmul(self.Lz, Z) + np.matmul(self.Lr, S)[:, None]  # (k, plants, R, classes)
         if self.last is None:  # the first sample has no increment
             D = np.concatenate([np.zeros_like(Y[:1]), np.diff(Y, axis=0)])
         else:
@@ -139,7 +140,7 @@ def _run(A, BM, sig, classes, z0, rows: _Rows | None):
     chunk = max(16, min(_CHUNK, _CHUNK_VALUES // max(width, 1)))
     for c0 in range(0, n_s, chunk):
         Sc = S[c0 : c0 + chunk]
-        U = np.einsum("pnj,kjc->kpnc", BM, Sc)
+        U = np.matmul(BM, Sc[:, None])  # (k, plants, n, classes)
         Z = np.empty_like(U)
         for i in range(len(Sc)):
             Z[i] = z
