@@ -261,29 +261,37 @@ def test_a_contraction_that_leaves_no_room_for_the_input_weights_is_not_sent_to_
     monkeypatch,
 ):
     """Each block's diagonal holds (1 - a) lam_j >= eps and sum(lam) <= 1: below 1 - a = m eps
-    (m inputs) the program has no solution, and it is answered infeasible without a solve;
-    at and above it the solver is asked, and its answer is the one returned."""
+    (m inputs) the program has no solution, and it is answered infeasible without a solve,
+    whether the loop's search (Ellipsoids.attempt) or the observer's asks; at and above it
+    the solver is asked, and its answer is the one returned."""
+    import importlib
+
     from bwdesign.certify import lmi
     from bwdesign.certify.robust_ellipsoid import EPS, Ellipsoids
 
+    analysis = importlib.import_module("bwdesign.certify.lmi.analysis")
     A, B = 0.5 * np.eye(2), np.ones((2, 3))  # m = 3 inputs
     ell = Ellipsoids(blocks=[(A, B)], n_corner=1, s=np.ones(2))
     ell.active[A.tobytes() + B.tobytes()] = 0
-    asked = []
-    real = lmi.robust_ellipsoid
+    solved = []
+    for name in ("run_program", "solve"):  # the cached program and the one built afresh
+        real = getattr(analysis, name)
 
-    def counted(*args, **kwargs):
-        asked.append(kwargs["a"])
-        return real(*args, **kwargs)
+        def counted(*args, _real=real, _name=name, **kwargs):
+            solved.append(_name)
+            return _real(*args, **kwargs)
 
-    monkeypatch.setattr(lmi, "robust_ellipsoid", counted)
+        monkeypatch.setattr(analysis, name, counted)
     c = np.array([1.0, 0.0])
     for eps in EPS:
-        sol = ell.attempt(1 - 0.99 * 3 * eps, c, eps)
-        assert not sol.ok and sol.status == "infeasible" and sol.solver == ""
-        assert "no solution: 1 - a" in sol.attempts[0] and asked == []
+        for sol in (
+            ell.attempt(1 - 0.99 * 3 * eps, c, eps),
+            lmi.robust_ellipsoid([A], [B], c, a=1 - 0.99 * 3 * eps, eps=eps),
+        ):
+            assert not sol.ok and sol.status == "infeasible" and sol.solver == ""
+            assert "no solution: 1 - a" in sol.attempts[0] and solved == []
     sol = ell.attempt(1 - 0.02, c)  # 1 - a = 0.02 > 3e-5: solved
-    assert sol.ok and asked == [1 - 0.02]
+    assert sol.ok and solved == ["run_program"]
 
 
 @pytest.mark.slow

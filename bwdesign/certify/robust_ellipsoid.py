@@ -107,15 +107,6 @@ class Ellipsoids:
         from . import lmi
 
         blocks, active = self.blocks, self.active
-        m = blocks[0][1].shape[1]
-        if not 1 - av >= m * eps:
-            # each block's diagonal holds (1 - a) lam_j >= eps for every input j, and
-            # sum(lam) <= 1: no solution unless 1 - a >= m eps. Such programs (the search's
-            # slowest contractions) were the slowest to solve, and a solver may still call
-            # one optimal within its tolerance (paper_experiment, +-5 % box, PHSO: 1 - a =
-            # 7.6e-5 < 9e-5 "optimal" after 93 iterations, 7.8 s)
-            why = f"no solution: 1 - a = {1 - av:.3g} < {m} inputs x eps = {m * eps:.3g}"
-            return lmi.LMISolution(False, "infeasible", "", None, attempts=(why,))
         while True:
             idx = sorted(active.values())
             sol = lmi.robust_ellipsoid(
