@@ -91,23 +91,24 @@ REPORT_DATE = "2000-01-01 00:00 UTC"
 #: loadfile --no-loadscope-reorder``), so no 20-50 s module runs alone at the end.
 #: test_claims_report.py and test_study_cache.py come after test_report.py has had time
 #: to write the shared paper_experiment report (:func:`paper_report`) they read.
-HEAVY_MODULES = (  # seconds of test time each, measured on 2 cores (durations, 2026-12-03)
-    "tests/test_codegen.py",  # 18: the C compiler, 1e5-step records
-    "tests/test_report.py",  # 15: the shared report, a second one, the not-certified one
-    "tests/test_identify_extensions.py",  # 12
-    "tests/test_sweep.py",  # 11: a report with [sweep] and [uncertainty]
-    "tests/test_claims_report.py",  # 9: the saturating and the unbounded reports
-    "tests/test_robust_observer.py",  # 7
-    "tests/test_baselines.py",  # 6
-    "tests/test_loop.py",  # 6
-    "tests/test_robust.py",  # 6
-    "tests/test_observers.py",  # 6
+HEAVY_MODULES = (  # seconds of test time each, measured on 2 cores (durations, 2026-12-08)
+    "tests/test_identify_extensions.py",  # 27
+    "tests/test_report.py",  # 23: the shared report, a second one, the not-certified one
+    "tests/test_background.py",  # 22: studies on two processes
+    "tests/test_sweep.py",  # 20: a report with [sweep] and [uncertainty]
+    "tests/test_robust_bounds.py",  # 18
+    "tests/test_claims_report.py",  # 16: the saturating and the unbounded reports
+    "tests/test_robust_observer.py",  # 16
+    "tests/test_observers.py",  # 16
+    "tests/test_baselines.py",  # 15
+    "tests/test_simulate.py",  # 13
+    "tests/test_structural.py",  # 12: the benchmark records
+    "tests/test_codegen.py",  # 12: the C compiler
+    "tests/test_robust.py",  # 11
+    "tests/test_kernel_process.py",  # 11: fresh interpreters
+    "tests/test_certify.py",  # 11
     "tests/test_docs_site.py",  # 7 when the site is built: Chromium
-    "tests/test_kernel_process.py",  # 5: fresh interpreters
-    "tests/test_structural.py",  # 5: the benchmark records
-    "tests/test_robust_reference.py",  # 4
-    "tests/test_simulate.py",  # 4
-    "tests/test_study_cache.py",  # 4: reads the shared report's cache
+    "tests/test_study_cache.py",  # 6: reads the shared report's cache
 )
 
 
